@@ -1,0 +1,32 @@
+#pragma once
+// Readers for the CSV formats of DESIGN.md. Errors name the file and 1-based line.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace kelvin {
+
+struct MarkerRest {
+  std::vector<std::string> names;
+  Eigen::Matrix3Xd positions;
+};
+/// `name,x,y,z` rows (a header line is allowed).
+MarkerRest read_marker_rest(const std::string& path);
+
+struct MarkerTracks {
+  std::vector<std::string> names;  // marker names from the header: <name>_x,_y,_z
+  std::vector<double> times;       // strictly increasing
+  Eigen::MatrixXd xyz;             // (3 × markers) × frames; NaN = occluded
+};
+/// Wide layout `t,a_x,a_y,a_z,b_x,...`; empty cells or NaN mean occluded.
+MarkerTracks read_marker_tracks(const std::string& path);
+
+struct ClampSamples {
+  std::vector<double> t;
+  std::vector<Eigen::Vector3d> translation;
+  std::vector<Eigen::Vector4d> quaternion_wxyz;  // normalised on read
+};
+/// `t,tx,ty,tz,qw,qx,qy,qz` rows; at least 2 rows, strictly increasing t.
+ClampSamples read_clamp_csv(const std::string& path);
+
+}  // namespace kelvin

@@ -1,0 +1,14 @@
+#pragma once
+// One exception type for every user-facing failure. The message is meant to be
+// printed as it is: it already names the file/line/key, element or time.
+#include <stdexcept>
+#include <string>
+
+namespace kelvin {
+
+class Error : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace kelvin

@@ -1,0 +1,76 @@
+#pragma once
+/// \file
+/// The constitutive interface. A material term evaluates, at one material point,
+/// the first Piola–Kirchhoff stress P(F, Ḟ; q) and on request dP/dF, dP/dḞ, dP/dq
+/// and the strain energy density Ψ(F; q). Elastic and viscous terms add up.
+/// Nothing else in kelvin evaluates constitutive laws: the forward solver, the
+/// Jacobian and every gradient come from here.
+///
+/// Tensor layout: 3×3 tensors are flattened column-major, index i + 3 j for A(i,j),
+/// so dP/dF(a, b) = ∂vec(P)_a / ∂vec(F)_b.
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace kelvin {
+
+using Mat3 = Eigen::Matrix3d;
+using Mat9 = Eigen::Matrix<double, 9, 9>;
+using Mat9X = Eigen::Matrix<double, 9, Eigen::Dynamic>;
+
+struct ParamInfo {
+  std::string name;        // key in the scenario file, e.g. "lambda"
+  std::string unit;        // e.g. "Pa", "Pa s", "1"
+  std::string description;
+  double default_value = 0;
+  double lower = -1e300, upper = 1e300;  // admissible closed range
+  bool positive = false;   // strictly positive: the fitter may optimise log q
+};
+
+/// What a caller wants from one evaluation (bit mask).
+enum Request : unsigned {
+  kStress = 1u,
+  kTangent = 2u,         // dP/dF
+  kRateTangent = 4u,     // dP/dḞ
+  kParamDerivative = 8u, // dP/dq
+  kEnergy = 16u,
+};
+
+struct MaterialPoint {
+  Mat3 F = Mat3::Identity();
+  Mat3 Fdot = Mat3::Zero();
+  const double* q = nullptr;  // this term's parameters, in params() order
+  int element = -1;           // for per-element state and for messages
+};
+
+struct MaterialResponse {
+  Mat3 P = Mat3::Zero();
+  Mat9 dPdF = Mat9::Zero();
+  Mat9 dPdFdot = Mat9::Zero();
+  Mat9X dPdq;                 // 9 × params().size()
+  double energy = 0;
+};
+
+class Material {
+ public:
+  virtual ~Material() = default;
+  virtual std::string name() const = 0;
+  virtual const std::vector<ParamInfo>& params() const = 0;
+  /// True when the stress depends on Ḟ (a damping term).
+  virtual bool is_viscous() const = 0;
+  /// True when P = ∂Ψ/∂F for the energy returned with kEnergy.
+  virtual bool has_energy() const { return false; }
+  /// Fills the requested fields of `out` (others are left untouched, except that
+  /// dPdq is resized). Returns false when the state is inadmissible (e.g. det F ≤ 0);
+  /// callers turn that into a message naming the element.
+  virtual bool evaluate(const MaterialPoint& in, unsigned request, MaterialResponse& out) const = 0;
+};
+
+/// Built-in models by scenario name ("neo-hookean", "newtonian", "power-law", ...).
+/// Returns nullptr for an unknown name.
+std::unique_ptr<Material> create_builtin_material(const std::string& name);
+/// Names of all built-in models, sorted.
+std::vector<std::string> builtin_material_names();
+
+}  // namespace kelvin
