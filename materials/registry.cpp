@@ -1,1 +1,36 @@
-// placeholder: implemented in a following commit
+#include <algorithm>
+#include <functional>
+#include <map>
+
+#include "materials/material.hpp"
+#include "materials/neo_hookean.hpp"
+#include "materials/power_law.hpp"
+
+namespace kelvin {
+namespace {
+
+using Factory = std::function<std::unique_ptr<Material>()>;
+
+const std::map<std::string, Factory>& factories() {
+  static const std::map<std::string, Factory> f = {
+      {"neo-hookean", [] { return std::make_unique<NeoHookean>(); }},
+      {"newtonian", [] { return std::make_unique<NewtonianViscosity>(); }},
+      {"power-law", [] { return std::make_unique<PowerLawViscosity>(); }},
+  };
+  return f;
+}
+
+}  // namespace
+
+std::unique_ptr<Material> create_builtin_material(const std::string& name) {
+  auto it = factories().find(name);
+  return it == factories().end() ? nullptr : it->second();
+}
+
+std::vector<std::string> builtin_material_names() {
+  std::vector<std::string> names;
+  for (const auto& [name, f] : factories()) names.push_back(name);
+  return names;
+}
+
+}  // namespace kelvin
