@@ -1,1 +1,273 @@
-// placeholder: implemented in a following commit
+#include "engine/fem_model.hpp"
+
+#include <Eigen/LU>
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "engine/error.hpp"
+
+namespace kelvin {
+
+Eigen::SparseMatrix<double> to_sparse_matrix(const SparsePattern& pattern,
+                                             const std::vector<double>& values) {
+  Eigen::SparseMatrix<double> A(pattern.n, pattern.n);
+  A.reserve(pattern.nnz());
+  std::copy(pattern.colptr.begin(), pattern.colptr.end(), A.outerIndexPtr());
+  std::copy(pattern.rowind.begin(), pattern.rowind.end(), A.innerIndexPtr());
+  std::copy(values.begin(), values.end(), A.valuePtr());
+  A.resizeNonZeros(pattern.nnz());
+  return A;
+}
+
+FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
+                   Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass)
+    : mesh_(mesh),
+      terms_(std::move(terms)),
+      density_(std::move(density)),
+      gravity_(gravity),
+      clamps_(std::move(clamps)),
+      lumped_(lumped_mass) {
+  const int nn = mesh.num_nodes(), ne = mesh.num_tets();
+  if (density_.size() != ne) throw Error("density field size does not match the mesh");
+  for (const auto& term : terms_)
+    if (term.q.cols() != ne || term.q.rows() != static_cast<int>(term.model->params().size()))
+      throw Error(fmt::format("parameter field of material '{}' has the wrong shape",
+                              term.model->name()));
+  elements_.reserve(ne);
+  for (int e = 0; e < ne; ++e) elements_.push_back(make_tet_element(mesh, e));
+
+  clamp_of_node_.assign(nn, -1);
+  for (int c = 0; c < static_cast<int>(clamps_.size()); ++c)
+    for (int node : clamps_[c].nodes) {
+      if (clamp_of_node_[node] >= 0)
+        throw Error(fmt::format("node {} belongs to clamps '{}' and '{}'", node,
+                                clamps_[clamp_of_node_[node]].name, clamps_[c].name));
+      clamp_of_node_[node] = c;
+    }
+  dof_.assign(3 * nn, -1);
+  for (int a = 0; a < nn; ++a)
+    if (clamp_of_node_[a] < 0)
+      for (int i = 0; i < 3; ++i) dof_[3 * a + i] = n_++;
+  build_pattern();
+  build_mass();
+}
+
+void FemModel::build_pattern() {
+  // Node adjacency through elements, expanded to 3×3 dof blocks.
+  const int ne = mesh_.num_tets();
+  std::vector<std::vector<int>> cols(n_);
+  for (const auto& el : elements_)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        for (int i = 0; i < 3; ++i)
+          for (int k = 0; k < 3; ++k) {
+            const int r = dof(el.nodes[a], i), c = dof(el.nodes[b], k);
+            if (r >= 0 && c >= 0) cols[c].push_back(r);
+          }
+  pattern_.n = n_;
+  pattern_.colptr.assign(n_ + 1, 0);
+  for (int c = 0; c < n_; ++c) {
+    auto& col = cols[c];
+    col.push_back(c);  // the diagonal is always present (lumped mass lives there)
+    std::sort(col.begin(), col.end());
+    col.erase(std::unique(col.begin(), col.end()), col.end());
+    pattern_.colptr[c + 1] = pattern_.colptr[c] + static_cast<int>(col.size());
+  }
+  pattern_.rowind.reserve(pattern_.colptr[n_]);
+  for (auto& col : cols) pattern_.rowind.insert(pattern_.rowind.end(), col.begin(), col.end());
+
+  scatter_.assign(static_cast<size_t>(ne) * 144, -1);
+  for (int e = 0; e < ne; ++e)
+    for (int b = 0; b < 12; ++b) {
+      const int c = dof(elements_[e].nodes[b / 3], b % 3);
+      if (c < 0) continue;
+      const auto begin = pattern_.rowind.begin() + pattern_.colptr[c];
+      const auto end = pattern_.rowind.begin() + pattern_.colptr[c + 1];
+      for (int a = 0; a < 12; ++a) {
+        const int r = dof(elements_[e].nodes[a / 3], a % 3);
+        if (r < 0) continue;
+        scatter_[static_cast<size_t>(e) * 144 + 12 * b + a] =
+            static_cast<int>(std::lower_bound(begin, end, r) - pattern_.rowind.begin());
+      }
+    }
+}
+
+void FemModel::build_mass() {
+  // Consistent mass of a linear tet: ρV/20 (1 + δ_ab) per node pair and direction;
+  // its row sums are the lumped masses ρV/4.
+  const int nn = mesh_.num_nodes();
+  node_mass_.setZero(nn);
+  mass_.assign(pattern_.nnz(), 0.0);
+  for (int e = 0; e < mesh_.num_tets(); ++e) {
+    const auto& el = elements_[e];
+    const double m = density_[e] * el.volume;
+    bool has_free = false, has_clamped = false;
+    for (int a = 0; a < 4; ++a) {
+      node_mass_[el.nodes[a]] += m / 4;
+      (clamp_of_node_[el.nodes[a]] < 0 ? has_free : has_clamped) = true;
+    }
+    if (has_free && has_clamped) clamp_coupled_elements_.push_back(e);
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        if (lumped_ && a != b) continue;
+        const double mab = lumped_ ? m / 4 : m / 20 * (a == b ? 2 : 1);
+        for (int i = 0; i < 3; ++i) {
+          const int idx = scatter_[static_cast<size_t>(e) * 144 + 12 * (3 * b + i) + 3 * a + i];
+          if (idx >= 0) mass_[idx] += mab;
+        }
+      }
+  }
+  if (lumped_) clamp_coupled_elements_.clear();
+  f_gravity_.setZero(n_);
+  for (int a = 0; a < nn; ++a)
+    for (int i = 0; i < 3; ++i)
+      if (dof(a, i) >= 0) f_gravity_[dof(a, i)] = node_mass_[a] * gravity_[i];
+}
+
+void FemModel::expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
+                      Eigen::Matrix3Xd& v) const {
+  const int nn = mesh_.num_nodes();
+  x.resize(3, nn);
+  v.resize(3, nn);
+  std::vector<RigidPose> poses;
+  poses.reserve(clamps_.size());
+  for (const auto& c : clamps_) poses.push_back(c.motion->at(t));
+  for (int a = 0; a < nn; ++a) {
+    const int c = clamp_of_node_[a];
+    if (c >= 0) {
+      const Eigen::Vector3d X = mesh_.nodes.col(a);
+      x.col(a) = poses[c].position(X);
+      v.col(a) = poses[c].velocity(X);
+    } else {
+      for (int i = 0; i < 3; ++i) {
+        x(i, a) = x_free[dof(a, i)];
+        v(i, a) = v_free ? v_free[dof(a, i)] : 0.0;
+      }
+    }
+  }
+}
+
+void FemModel::restrict(const Eigen::Matrix3Xd& full, double* free) const {
+  for (int a = 0; a < mesh_.num_nodes(); ++a)
+    for (int i = 0; i < 3; ++i)
+      if (dof(a, i) >= 0) free[dof(a, i)] = full(i, a);
+}
+
+void FemModel::clamp_inertia(double t, Eigen::VectorXd& out) const {
+  out.setZero(n_);
+  if (clamp_coupled_elements_.empty()) return;
+  std::vector<RigidPose> poses;
+  for (const auto& c : clamps_) poses.push_back(c.motion->at(t));
+  for (int e : clamp_coupled_elements_) {
+    const auto& el = elements_[e];
+    const double m = density_[e] * el.volume / 20;
+    for (int b = 0; b < 4; ++b) {
+      const int c = clamp_of_node_[el.nodes[b]];
+      if (c < 0) continue;
+      const Eigen::Vector3d acc = poses[c].acceleration(mesh_.nodes.col(el.nodes[b]));
+      for (int a = 0; a < 4; ++a)
+        for (int i = 0; i < 3; ++i)
+          if (dof(el.nodes[a], i) >= 0) out[dof(el.nodes[a], i)] += m * acc[i];
+    }
+  }
+}
+
+void FemModel::mass_multiply(const double* x, double* y) const {
+  for (int c = 0; c < n_; ++c)
+    for (int k = pattern_.colptr[c]; k < pattern_.colptr[c + 1]; ++k)
+      y[pattern_.rowind[k]] += mass_[k] * x[c];
+}
+
+bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                        const AssemblyRequest& req, AssemblyOutput& out) const {
+  const int ne = mesh_.num_tets();
+  if (req.force) out.force.setZero(n_);
+  if (req.stiffness) out.K.assign(pattern_.nnz(), 0.0);
+  if (req.damping) out.D.assign(pattern_.nnz(), 0.0);
+  if (req.energy) out.cell_energy.setZero(ne);
+  out.energy = 0;
+  out.failed_element = -1;
+
+  unsigned request = kStress;
+  if (req.stiffness) request |= kTangent;
+  if (req.damping) request |= kRateTangent;
+
+  MaterialPoint mp;
+  MaterialResponse resp;
+  Eigen::Matrix<double, 3, 4> xe, ve;
+  Eigen::Matrix<double, 12, 12> Ke, De;
+  for (int e = 0; e < ne; ++e) {
+    const auto& el = elements_[e];
+    for (int a = 0; a < 4; ++a) {
+      xe.col(a) = x.col(el.nodes[a]);
+      ve.col(a) = v.col(el.nodes[a]);
+    }
+    mp.F = xe * el.G.transpose();
+    mp.Fdot = ve * el.G.transpose();
+    mp.element = e;
+    Mat3 P = Mat3::Zero();
+    if (req.stiffness) Ke.setZero();
+    if (req.damping) De.setZero();
+    for (const auto& term : terms_) {
+      const bool viscous = term.model->is_viscous();
+      unsigned r = request;
+      if (viscous) r &= ~static_cast<unsigned>(kEnergy);
+      else if (req.energy) r |= kEnergy;
+      if (!viscous) r &= ~static_cast<unsigned>(kRateTangent);
+      mp.q = term.q.col(e).data();
+      if (!term.model->evaluate(mp, r, resp)) {
+        out.failed_element = e;
+        out.failed_det = mp.F.determinant();
+        return false;
+      }
+      P += resp.P;
+      if (r & kTangent) accumulate_element_matrix(el, resp.dPdF, 1.0, Ke);
+      if (r & kRateTangent) accumulate_element_matrix(el, resp.dPdFdot, 1.0, De);
+      if (r & kEnergy) {
+        out.cell_energy[e] += resp.energy;
+        out.energy += el.volume * resp.energy;
+      }
+    }
+    if (!P.allFinite()) {
+      out.failed_element = e;
+      out.failed_det = mp.F.determinant();
+      return false;
+    }
+    if (req.force) {
+      const Eigen::Matrix<double, 3, 4> fe = el.volume * P * el.G;
+      for (int a = 0; a < 4; ++a)
+        for (int i = 0; i < 3; ++i) {
+          const int d = dof(el.nodes[a], i);
+          if (d >= 0) out.force[d] += fe(i, a);
+        }
+    }
+    const int* sc = &scatter_[static_cast<size_t>(e) * 144];
+    if (req.stiffness)
+      for (int k = 0; k < 144; ++k)
+        if (sc[k] >= 0) out.K[sc[k]] += Ke(k % 12, k / 12);
+    if (req.damping)
+      for (int k = 0; k < 144; ++k)
+        if (sc[k] >= 0) out.D[sc[k]] += De(k % 12, k / 12);
+  }
+  return true;
+}
+
+double FemModel::kinetic_energy(const Eigen::Matrix3Xd& v) const {
+  if (lumped_) return 0.5 * (v.colwise().squaredNorm().transpose().array() * node_mass_.array()).sum();
+  double ke = 0;
+  for (int e = 0; e < mesh_.num_tets(); ++e) {
+    const auto& el = elements_[e];
+    const double m = density_[e] * el.volume / 20;
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        ke += 0.5 * m * (a == b ? 2 : 1) * v.col(el.nodes[a]).dot(v.col(el.nodes[b]));
+  }
+  return ke;
+}
+
+double FemModel::gravity_potential(const Eigen::Matrix3Xd& x) const {
+  return -(node_mass_.transpose() * (gravity_.transpose() * x).transpose())(0);
+}
+
+}  // namespace kelvin

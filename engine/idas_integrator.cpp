@@ -1,1 +1,267 @@
-// placeholder: implemented in a following commit
+#include "engine/idas_integrator.hpp"
+
+#include <fmt/format.h>
+#include <idas/idas.h>
+#include <nvector/nvector_serial.h>
+#include <sunlinsol/sunlinsol_klu.h>
+#include <sunmatrix/sunmatrix_sparse.h>
+
+#include <chrono>
+#include <mutex>
+#include <unordered_map>
+
+#include "engine/dae_system.hpp"
+#include "engine/error.hpp"
+
+namespace kelvin {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// The KLU solver's setup/solve, wrapped so that their share of the run time can
+/// be reported. SUNDIALS ops tables are per instance; the originals are kept here.
+struct TimedOps {
+  int (*setup)(SUNLinearSolver, SUNMatrix);
+  int (*solve)(SUNLinearSolver, SUNMatrix, N_Vector, N_Vector, realtype);
+  double* setup_seconds;
+  double* solve_seconds;
+  long* solves;
+};
+std::mutex timed_mutex;
+std::unordered_map<SUNLinearSolver, TimedOps>& timed_ops() {
+  static std::unordered_map<SUNLinearSolver, TimedOps> m;
+  return m;
+}
+TimedOps lookup(SUNLinearSolver S) {
+  std::lock_guard<std::mutex> lock(timed_mutex);
+  return timed_ops().at(S);
+}
+int timed_setup(SUNLinearSolver S, SUNMatrix A) {
+  const TimedOps ops = lookup(S);
+  const auto start = Clock::now();
+  const int flag = ops.setup(S, A);
+  *ops.setup_seconds += seconds_since(start);
+  return flag;
+}
+int timed_solve(SUNLinearSolver S, SUNMatrix A, N_Vector x, N_Vector b, realtype tol) {
+  const TimedOps ops = lookup(S);
+  const auto start = Clock::now();
+  const int flag = ops.solve(S, A, x, b, tol);
+  *ops.solve_seconds += seconds_since(start);
+  ++*ops.solves;
+  return flag;
+}
+
+}  // namespace
+
+struct IdasIntegrator::Impl {
+  const FemModel& model;
+  IntegratorOptions opt;
+  int n = 0;
+  SUNContext ctx = nullptr;
+  void* mem = nullptr;
+  N_Vector y = nullptr, yp = nullptr, yout = nullptr, atol = nullptr;
+  SUNMatrix J = nullptr;
+  SUNLinearSolver LS = nullptr;
+  double t_solver = 0;  // internal time of IDAS
+
+  DaeSystem dae;
+
+  // diagnostics
+  IntegratorStats stats;
+  std::string last_idas_message;
+  int failed_element = -1;
+  double failed_det = 0, failed_time = 0;
+
+  Impl(const FemModel& m, const IntegratorOptions& o)
+      : model(m), opt(o), n(m.num_dofs()), dae(m) {}
+
+  ~Impl() {
+    if (mem) IDAFree(&mem);
+    if (LS) {
+      std::lock_guard<std::mutex> lock(timed_mutex);
+      timed_ops().erase(LS);
+      SUNLinSolFree(LS);
+    }
+    if (J) SUNMatDestroy(J);
+    for (N_Vector v : {y, yp, yout, atol})
+      if (v) N_VDestroy(v);
+    if (ctx) SUNContext_Free(&ctx);
+  }
+
+  void record_failure(double t) {
+    failed_element = dae.last_assembly().failed_element;
+    failed_det = dae.last_assembly().failed_det;
+    failed_time = t;
+  }
+
+  int residual(double t, const double* y, const double* yp, double* r) {
+    const auto start = Clock::now();
+    const bool ok = dae.residual(t, y, yp, r);
+    stats.residual_seconds += seconds_since(start);
+    if (!ok) record_failure(t);
+    return ok ? 0 : 1;  // recoverable: IDAS retries with a smaller step
+  }
+
+  int jacobian(double t, double cj, const double* y) {
+    const auto start = Clock::now();
+    const bool ok = dae.jacobian(t, cj, y, SUNSparseMatrix_Data(J));
+    stats.jacobian_seconds += seconds_since(start);
+    if (!ok) record_failure(t);
+    return ok ? 0 : 1;
+  }
+};
+
+namespace {
+
+int residual_fn(realtype t, N_Vector y, N_Vector yp, N_Vector r, void* data) {
+  auto* impl = static_cast<IdasIntegrator::Impl*>(data);
+  return impl->residual(t, N_VGetArrayPointer(y), N_VGetArrayPointer(yp), N_VGetArrayPointer(r));
+}
+
+int jacobian_fn(realtype t, realtype cj, N_Vector y, N_Vector, N_Vector, SUNMatrix, void* data,
+                N_Vector, N_Vector, N_Vector) {
+  auto* impl = static_cast<IdasIntegrator::Impl*>(data);
+  return impl->jacobian(t, cj, N_VGetArrayPointer(y));
+}
+
+void error_handler(int, const char* module, const char* function, char* msg, void* data) {
+  auto* impl = static_cast<IdasIntegrator::Impl*>(data);
+  impl->last_idas_message = fmt::format("{} {}: {}", module, function, msg);
+}
+
+void check(int flag, const char* call) {
+  if (flag < 0) throw Error(fmt::format("IDAS setup failed in {} (flag {})", call, flag));
+}
+
+}  // namespace
+
+double IntegratorStats::mean_order() const {
+  long total = 0, weighted = 0;
+  for (int q = 1; q <= 5; ++q) {
+    total += order_histogram[q];
+    weighted += q * order_histogram[q];
+  }
+  return total ? static_cast<double>(weighted) / total : 0.0;
+}
+
+IdasIntegrator::IdasIntegrator(const FemModel& model, const IntegratorOptions& options)
+    : impl_(std::make_unique<Impl>(model, options)) {}
+
+IdasIntegrator::~IdasIntegrator() = default;
+
+void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eigen::VectorXd& v0) {
+  Impl& m = *impl_;
+  const int n = m.n;
+  if (n == 0) throw Error("every node is clamped: there is nothing to simulate");
+  check(SUNContext_Create(nullptr, &m.ctx), "SUNContext_Create");
+  m.y = N_VNew_Serial(2 * n, m.ctx);
+  m.yp = N_VNew_Serial(2 * n, m.ctx);
+  m.yout = N_VNew_Serial(2 * n, m.ctx);
+  m.atol = N_VNew_Serial(2 * n, m.ctx);
+  double* y = N_VGetArrayPointer(m.y);
+  double* yp = N_VGetArrayPointer(m.yp);
+  Eigen::Map<Eigen::VectorXd>(y, n) = x0;
+  Eigen::Map<Eigen::VectorXd>(y + n, n) = v0;
+
+  if (!m.dae.consistent_derivative(t0, y, yp))
+    throw Error(fmt::format("initial state: element {} is inverted (det F = {:.3g})",
+                            m.dae.last_assembly().failed_element,
+                            m.dae.last_assembly().failed_det));
+
+  m.mem = IDACreate(m.ctx);
+  if (!m.mem) throw Error("IDACreate failed");
+  check(IDASetErrHandlerFn(m.mem, error_handler, &m), "IDASetErrHandlerFn");
+  check(IDAInit(m.mem, residual_fn, t0, m.y, m.yp), "IDAInit");
+  double* atol = N_VGetArrayPointer(m.atol);
+  for (int i = 0; i < n; ++i) {
+    atol[i] = m.opt.atol;
+    atol[n + i] = m.opt.atol * m.opt.velocity_atol_scale;
+  }
+  check(IDASVtolerances(m.mem, m.opt.rtol, m.atol), "IDASVtolerances");
+  check(IDASetUserData(m.mem, &m), "IDASetUserData");
+  const sunindextype nnz = m.dae.nnz();
+  m.J = SUNSparseMatrix(2 * n, 2 * n, nnz, CSC_MAT, m.ctx);
+  m.dae.structure(SUNSparseMatrix_IndexPointers(m.J), SUNSparseMatrix_IndexValues(m.J));
+  m.LS = SUNLinSol_KLU(m.y, m.J, m.ctx);
+  if (!m.LS) throw Error("SUNLinSol_KLU failed");
+  {
+    std::lock_guard<std::mutex> lock(timed_mutex);
+    timed_ops()[m.LS] = {m.LS->ops->setup, m.LS->ops->solve, &m.stats.setup_seconds,
+                         &m.stats.solve_seconds, &m.stats.linear_solves};
+  }
+  m.LS->ops->setup = timed_setup;
+  m.LS->ops->solve = timed_solve;
+  check(IDASetLinearSolver(m.mem, m.LS, m.J), "IDASetLinearSolver");
+  check(IDASetJacFn(m.mem, jacobian_fn), "IDASetJacFn");
+  check(IDASetMaxOrd(m.mem, m.opt.max_order), "IDASetMaxOrd");
+  check(IDASetMaxNumSteps(m.mem, m.opt.max_steps), "IDASetMaxNumSteps");
+  if (m.opt.max_step > 0) check(IDASetMaxStep(m.mem, m.opt.max_step), "IDASetMaxStep");
+  if (m.opt.initial_step > 0) check(IDASetInitStep(m.mem, m.opt.initial_step), "IDASetInitStep");
+  m.t_solver = t0;
+  t_ = t0;
+  x_ = x0;
+  v_ = v0;
+}
+
+bool IdasIntegrator::advance_to(double tout, double t_stop) {
+  Impl& m = *impl_;
+  const int n = m.n;
+  check(IDASetStopTime(m.mem, t_stop), "IDASetStopTime");
+  // One step at a time, so that the order of every step can be counted.
+  while (m.t_solver < tout) {
+    if (m.stats.steps >= m.opt.max_steps) {
+      error_ = fmt::format("stopped at t = {:.6g} s: the step limit solver.max_steps = {} was "
+                           "reached", m.t_solver, m.opt.max_steps);
+      return false;
+    }
+    m.failed_element = -1;
+    double tret = 0;
+    const int flag = IDASolve(m.mem, t_stop, &tret, m.yout, m.yp, IDA_ONE_STEP);
+    if (flag < 0) {
+      double tcur = m.t_solver;
+      IDAGetCurrentTime(m.mem, &tcur);
+      std::string why = IDAGetReturnFlagName(flag);
+      if (m.failed_element >= 0)
+        why += fmt::format(": element {} is inverted or degenerate (det F = {:.3g}) at t = {:.6g} s",
+                           m.failed_element, m.failed_det, m.failed_time);
+      else if (!m.last_idas_message.empty())
+        why += ": " + m.last_idas_message;
+      error_ = fmt::format("the solver failed at t = {:.6g} s ({})", tcur, why);
+      return false;
+    }
+    m.t_solver = tret;
+    ++m.stats.steps;
+    int order = 0;
+    IDAGetLastOrder(m.mem, &order);
+    if (order >= 1 && order <= 5) ++m.stats.order_histogram[order];
+  }
+  const double t = std::min(tout, m.t_solver);
+  if (IDAGetDky(m.mem, t, 0, m.yout) < 0) {
+    error_ = fmt::format("could not interpolate the state at t = {:.6g} s", t);
+    return false;
+  }
+  const double* yo = N_VGetArrayPointer(m.yout);
+  t_ = t;
+  x_ = Eigen::Map<const Eigen::VectorXd>(yo, n);
+  v_ = Eigen::Map<const Eigen::VectorXd>(yo + n, n);
+  return true;
+}
+
+IntegratorStats IdasIntegrator::stats() const {
+  IntegratorStats s = impl_->stats;
+  void* mem = impl_->mem;
+  if (!mem) return s;
+  long v = 0;
+  if (IDAGetNumResEvals(mem, &v) == 0) s.residual_evals = v;
+  if (IDAGetNumJacEvals(mem, &v) == 0) s.jacobian_evals = v;
+  if (IDAGetNumLinSolvSetups(mem, &v) == 0) s.linear_setups = v;
+  if (IDAGetNumErrTestFails(mem, &v) == 0) s.error_test_failures = v;
+  if (IDAGetNumNonlinSolvConvFails(mem, &v) == 0) s.convergence_failures = v;
+  return s;
+}
+
+}  // namespace kelvin

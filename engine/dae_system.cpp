@@ -1,0 +1,61 @@
+#include "engine/dae_system.hpp"
+
+#include <Eigen/SparseCholesky>
+
+namespace kelvin {
+
+DaeSystem::DaeSystem(const FemModel& model) : model_(model), n_(model.num_dofs()) {}
+
+bool DaeSystem::residual(double t, const double* y, const double* yp, double* r) {
+  model_.expand(t, y, y + n_, x_, v_);
+  if (!model_.assemble(x_, v_, {}, out_)) return false;
+  model_.clamp_inertia(t, clamp_inertia_);
+  for (int i = 0; i < n_; ++i) r[i] = yp[i] - y[n_ + i];
+  double* rv = r + n_;
+  for (int i = 0; i < n_; ++i)
+    rv[i] = out_.force[i] + clamp_inertia_[i] - model_.gravity_force()[i];
+  model_.mass_multiply(yp + n_, rv);
+  return true;
+}
+
+bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {
+  model_.expand(t, y, y + n_, x_, v_);
+  AssemblyRequest req;
+  req.force = false;
+  req.stiffness = true;
+  req.damping = true;
+  if (!model_.assemble(x_, v_, req, out_)) return false;
+  const SparsePattern& P = model_.pattern();
+  const std::vector<double>& M = model_.mass();
+  long k = 0;
+  for (int j = 0; j < n_; ++j) {
+    val[k++] = cj;
+    for (int p = P.colptr[j]; p < P.colptr[j + 1]; ++p) val[k++] = out_.K[p];
+  }
+  for (int j = 0; j < n_; ++j) {
+    val[k++] = -1.0;
+    for (int p = P.colptr[j]; p < P.colptr[j + 1]; ++p) val[k++] = cj * M[p] + out_.D[p];
+  }
+  return true;
+}
+
+bool DaeSystem::consistent_derivative(double t, const double* y, double* yp) {
+  model_.expand(t, y, y + n_, x_, v_);
+  if (!model_.assemble(x_, v_, {}, out_)) return false;
+  model_.clamp_inertia(t, clamp_inertia_);
+  const Eigen::VectorXd rhs = model_.gravity_force() - out_.force - clamp_inertia_;
+  for (int i = 0; i < n_; ++i) yp[i] = y[n_ + i];
+  Eigen::Map<Eigen::VectorXd> acc(yp + n_, n_);
+  const SparsePattern& P = model_.pattern();
+  if (model_.lumped_mass()) {
+    for (int j = 0; j < n_; ++j)
+      for (int p = P.colptr[j]; p < P.colptr[j + 1]; ++p)
+        if (P.rowind[p] == j) acc[j] = rhs[j] / model_.mass()[p];
+  } else {
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(to_sparse_matrix(P, model_.mass()));
+    acc = ldlt.solve(rhs);
+  }
+  return true;
+}
+
+}  // namespace kelvin

@@ -1,0 +1,126 @@
+#pragma once
+/// \file
+/// The spatially discretised solid: elements, material terms, mass, gravity and
+/// clamps, with internal forces and tangents assembled into a sparsity pattern
+/// computed once. Unknowns are the free nodal dofs (clamped nodes eliminated):
+/// dof(node, i) ∈ [0, n) or −1 for a clamped node.
+///
+/// Sign convention: the "resisting force" r(x, v) = Σ_e V_e P_e G_e is minus the
+/// internal force, so the equation of motion reads M v̇ + r(x, v) = f_ext, and
+/// K = ∂r/∂x, D = ∂r/∂v are the stiffness and damping matrices.
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/element.hpp"
+#include "engine/mesh.hpp"
+#include "engine/rigid_motion.hpp"
+#include "materials/material.hpp"
+
+namespace kelvin {
+
+/// One additive constitutive term with its parameters per element (nq × tets).
+struct MaterialTerm {
+  std::shared_ptr<const Material> model;
+  Eigen::MatrixXd q;
+};
+
+struct ClampBinding {
+  std::string name;
+  std::vector<int> nodes;
+  std::shared_ptr<const RigidMotion> motion;
+};
+
+/// Symmetric CSC pattern over the free dofs, including the diagonal.
+struct SparsePattern {
+  int n = 0;
+  std::vector<int> colptr, rowind;
+  int nnz() const { return static_cast<int>(rowind.size()); }
+};
+
+/// Values laid out in `pattern` as an Eigen sparse matrix (for direct solvers).
+Eigen::SparseMatrix<double> to_sparse_matrix(const SparsePattern& pattern,
+                                             const std::vector<double>& values);
+
+struct AssemblyRequest {
+  bool force = true;
+  bool stiffness = false;  // K values
+  bool damping = false;    // D values
+  bool energy = false;     // per-cell strain energy density and total elastic energy
+};
+
+struct AssemblyOutput {
+  Eigen::VectorXd force;       // r over free dofs
+  std::vector<double> K, D;    // values in pattern() order
+  Eigen::VectorXd cell_energy; // Ψ per tet (energy density, J/m³)
+  double energy = 0;           // Σ V Ψ
+  int failed_element = -1;     // set when a material reported an inadmissible state
+  double failed_det = 0;       // det F of that element
+};
+
+class FemModel {
+ public:
+  FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
+           Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass);
+
+  const Mesh& mesh() const { return mesh_; }
+  int num_dofs() const { return n_; }
+  int dof(int node, int i) const { return dof_[3 * node + i]; }
+  const SparsePattern& pattern() const { return pattern_; }
+  const std::vector<TetElement>& elements() const { return elements_; }
+  const std::vector<MaterialTerm>& terms() const { return terms_; }
+  std::vector<MaterialTerm>& terms() { return terms_; }
+  const std::vector<ClampBinding>& clamps() const { return clamps_; }
+  bool lumped_mass() const { return lumped_; }
+  /// Mass matrix values in pattern() order (diagonal only for lumped mass).
+  const std::vector<double>& mass() const { return mass_; }
+  /// Gravity force on the free dofs (row sums of the full mass matrix times g).
+  const Eigen::VectorXd& gravity_force() const { return f_gravity_; }
+
+  /// Full nodal positions and velocities at time t from the free-dof vectors
+  /// (clamped nodes follow their motion).
+  void expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
+              Eigen::Matrix3Xd& v) const;
+  /// Free-dof vector of a full nodal field.
+  void restrict(const Eigen::Matrix3Xd& full, double* free) const;
+  /// M_fc a_c: inertia of the free dofs coupled to clamp accelerations (zero for
+  /// lumped mass, where M has no free–clamped entries).
+  void clamp_inertia(double t, Eigen::VectorXd& out) const;
+  /// y += M x over the free dofs.
+  void mass_multiply(const double* x, double* y) const;
+
+  /// Assembles the requested quantities at full positions x and velocities v.
+  /// Returns false (with failed_element set) when some element is inadmissible.
+  bool assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const AssemblyRequest& req,
+                AssemblyOutput& out) const;
+
+  /// Kinetic energy ½ vᵀ M v over all nodes (clamped included) for full velocities.
+  double kinetic_energy(const Eigen::Matrix3Xd& v) const;
+  /// Gravitational potential −Σ m_a g·x_a for full positions.
+  double gravity_potential(const Eigen::Matrix3Xd& x) const;
+
+ private:
+  void build_pattern();
+  void build_mass();
+
+  const Mesh& mesh_;
+  std::vector<MaterialTerm> terms_;
+  Eigen::VectorXd density_;  // per tet
+  Eigen::Vector3d gravity_;
+  std::vector<ClampBinding> clamps_;
+  bool lumped_;
+  std::vector<TetElement> elements_;
+  std::vector<int> dof_;            // 3 × nodes → free dof or −1
+  std::vector<int> clamp_of_node_;  // clamp index or −1
+  int n_ = 0;
+  SparsePattern pattern_;
+  std::vector<int> scatter_;        // per element 12×12 → pattern value index or −1
+  std::vector<double> mass_;        // pattern values
+  Eigen::VectorXd node_mass_;       // lumped nodal masses (all nodes)
+  Eigen::VectorXd f_gravity_;
+  std::vector<int> clamp_coupled_elements_;  // elements with free and clamped nodes
+};
+
+}  // namespace kelvin
