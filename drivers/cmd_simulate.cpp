@@ -1,1 +1,61 @@
-// placeholder: implemented in a following commit
+#include <fmt/format.h>
+
+#include <filesystem>
+
+#include "drivers/commands.hpp"
+#include "engine/error.hpp"
+#include "engine/simulation.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+
+void register_simulate(CLI::App& app, int& exit_code) {
+  struct Args {
+    std::string scenario, outdir;
+    bool quiet = false;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "simulate",
+      "Run a forward simulation of a scenario: marker trajectories (markers.csv), ParaView "
+      "frames (.vtu + .pvd) and a run summary (summary.txt) in the output directory.");
+  cmd->add_option("scenario", args->scenario, "scenario YAML file")->required();
+  cmd->add_option("-o,--output", args->outdir,
+                  "output directory (default: <scenario name>-out in the current directory)");
+  cmd->add_flag("-q,--quiet", args->quiet, "print only the summary line");
+  cmd->callback([args, &exit_code] {
+    Scenario scenario;
+    try {
+      scenario = load_scenario(args->scenario);
+    } catch (const Error& e) {
+      fmt::print(stderr, "error: {}\n", e.what());
+      exit_code = kExitInputError;
+      return;
+    }
+    const std::string outdir =
+        args->outdir.empty()
+            ? std::filesystem::path(args->scenario).stem().string() + "-out"
+            : args->outdir;
+    if (!args->quiet)
+      fmt::print("kelvin simulate: {} ({} nodes, {} tetrahedra) → {}\n", scenario.name,
+                 scenario.mesh.num_nodes(), scenario.mesh.num_tets(), outdir);
+    SimulationOptions options;
+    options.outdir = outdir;
+    options.interrupt = &g_interrupted;
+    options.progress = !args->quiet;
+    try {
+      const SimulationResult r = run_simulation(scenario, options);
+      fmt::print("{}\n", r.summary());
+      if (!r.completed) {
+        if (!r.error.empty()) fmt::print(stderr, "error: {}\n", r.error);
+        fmt::print(stderr, "outputs up to t = {:.6g} s are in {}\n", r.t_reached, outdir);
+        exit_code = r.interrupted ? kExitInterrupted : kExitRunFailed;
+      }
+    } catch (const Error& e) {
+      fmt::print(stderr, "error: {}\n", e.what());
+      exit_code = kExitRunFailed;
+    }
+  });
+}
+
+}  // namespace kelvin

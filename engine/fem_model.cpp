@@ -34,6 +34,11 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
     if (term.q.cols() != ne || term.q.rows() != static_cast<int>(term.model->params().size()))
       throw Error(fmt::format("parameter field of material '{}' has the wrong shape",
                               term.model->name()));
+  for (const auto& term : terms_)
+    if (term.model->state_size() > 0 &&
+        (term.state.rows() != term.model->state_size() || term.state.cols() != ne))
+      throw Error(fmt::format("state field of material '{}' has the wrong shape",
+                              term.model->name()));
   elements_.reserve(ne);
   for (int e = 0; e < ne; ++e) elements_.push_back(make_tet_element(mesh, e));
 
@@ -216,6 +221,7 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
       else if (req.energy) r |= kEnergy;
       if (!viscous) r &= ~static_cast<unsigned>(kRateTangent);
       mp.q = term.q.col(e).data();
+      mp.state = term.state.size() ? term.state.col(e).data() : nullptr;
       if (!term.model->evaluate(mp, r, resp)) {
         out.failed_element = e;
         out.failed_det = mp.F.determinant();

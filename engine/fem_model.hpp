@@ -21,10 +21,12 @@
 
 namespace kelvin {
 
-/// One additive constitutive term with its parameters per element (nq × tets).
+/// One additive constitutive term with its parameters per element (nq × tets) and
+/// its fixed per-element state (state_size × tets, e.g. fibre directions).
 struct MaterialTerm {
   std::shared_ptr<const Material> model;
   Eigen::MatrixXd q;
+  Eigen::MatrixXd state;  // empty when the model has none
 };
 
 struct ClampBinding {

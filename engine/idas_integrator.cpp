@@ -73,6 +73,7 @@ struct IdasIntegrator::Impl {
   // diagnostics
   IntegratorStats stats;
   std::string last_idas_message;
+  std::string fatal_message;  // from an exception inside a callback
   int failed_element = -1;
   double failed_det = 0, failed_time = 0;
 
@@ -98,20 +99,31 @@ struct IdasIntegrator::Impl {
     failed_time = t;
   }
 
-  int residual(double t, const double* y, const double* yp, double* r) {
+  /// Runs a callback body: inadmissible states are recoverable (IDAS retries with
+  /// a smaller step); exceptions (e.g. a plugin that failed) must not cross the C
+  /// frames of IDAS, so they become an unrecoverable failure with their message kept.
+  template <class Body>
+  int guarded(double t, double& seconds, Body body) {
     const auto start = Clock::now();
-    const bool ok = dae.residual(t, y, yp, r);
-    stats.residual_seconds += seconds_since(start);
+    bool ok = false;
+    try {
+      ok = body();
+    } catch (const std::exception& e) {
+      fatal_message = e.what();
+      return -1;
+    }
+    seconds += seconds_since(start);
     if (!ok) record_failure(t);
-    return ok ? 0 : 1;  // recoverable: IDAS retries with a smaller step
+    return ok ? 0 : 1;
+  }
+
+  int residual(double t, const double* y, const double* yp, double* r) {
+    return guarded(t, stats.residual_seconds, [&] { return dae.residual(t, y, yp, r); });
   }
 
   int jacobian(double t, double cj, const double* y) {
-    const auto start = Clock::now();
-    const bool ok = dae.jacobian(t, cj, y, SUNSparseMatrix_Data(J));
-    stats.jacobian_seconds += seconds_since(start);
-    if (!ok) record_failure(t);
-    return ok ? 0 : 1;
+    return guarded(t, stats.jacobian_seconds,
+                   [&] { return dae.jacobian(t, cj, y, SUNSparseMatrix_Data(J)); });
   }
 };
 
@@ -225,7 +237,9 @@ bool IdasIntegrator::advance_to(double tout, double t_stop) {
       double tcur = m.t_solver;
       IDAGetCurrentTime(m.mem, &tcur);
       std::string why = IDAGetReturnFlagName(flag);
-      if (m.failed_element >= 0)
+      if (!m.fatal_message.empty())
+        why += ": " + m.fatal_message;
+      else if (m.failed_element >= 0)
         why += fmt::format(": element {} is inverted or degenerate (det F = {:.3g}) at t = {:.6g} s",
                            m.failed_element, m.failed_det, m.failed_time);
       else if (!m.last_idas_message.empty())

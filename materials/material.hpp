@@ -40,8 +40,9 @@ enum Request : unsigned {
 struct MaterialPoint {
   Mat3 F = Mat3::Identity();
   Mat3 Fdot = Mat3::Zero();
-  const double* q = nullptr;  // this term's parameters, in params() order
-  int element = -1;           // for per-element state and for messages
+  const double* q = nullptr;      // this term's parameters, in params() order
+  const double* state = nullptr;  // this element's fixed state (state_size() values), or null
+  int element = -1;               // for messages
 };
 
 struct MaterialResponse {
@@ -61,6 +62,10 @@ class Material {
   virtual bool is_viscous() const = 0;
   /// True when P = ∂Ψ/∂F for the energy returned with kEnergy.
   virtual bool has_energy() const { return false; }
+  /// Per-element data the model needs that is not fitted (e.g. a fibre direction):
+  /// its size, and the value used where a scenario gives none.
+  virtual int state_size() const { return 0; }
+  virtual std::vector<double> default_state() const { return {}; }
   /// Fills the requested fields of `out` (others are left untouched, except that
   /// dPdq is resized). Returns false when the state is inadmissible (e.g. det F ≤ 0);
   /// callers turn that into a message naming the element.
@@ -70,6 +75,9 @@ class Material {
 /// Built-in models by scenario name ("neo-hookean", "newtonian", "power-law", ...).
 /// Returns nullptr for an unknown name.
 std::unique_ptr<Material> create_builtin_material(const std::string& name);
+/// A built-in model (plugin_path empty) or a model from a plugin library; throws
+/// kelvin::Error when the model or the plugin cannot be had.
+std::unique_ptr<Material> create_material(const std::string& name, const std::string& plugin_path);
 /// Names of all built-in models, sorted.
 std::vector<std::string> builtin_material_names();
 

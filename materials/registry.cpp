@@ -2,8 +2,10 @@
 #include <functional>
 #include <map>
 
+#include "engine/error.hpp"
 #include "materials/material.hpp"
 #include "materials/neo_hookean.hpp"
+#include "materials/plugin_loader.hpp"
 #include "materials/power_law.hpp"
 
 namespace kelvin {
@@ -25,6 +27,13 @@ const std::map<std::string, Factory>& factories() {
 std::unique_ptr<Material> create_builtin_material(const std::string& name) {
   auto it = factories().find(name);
   return it == factories().end() ? nullptr : it->second();
+}
+
+std::unique_ptr<Material> create_material(const std::string& name, const std::string& plugin_path) {
+  if (!plugin_path.empty()) return load_plugin_material(plugin_path, name);
+  auto m = create_builtin_material(name);
+  if (!m) throw Error("unknown material model '" + name + "'");
+  return m;
 }
 
 std::vector<std::string> builtin_material_names() {

@@ -1,0 +1,17 @@
+#pragma once
+// Subcommands of the `kelvin` executable; each registers its options on the app.
+#include <CLI/CLI.hpp>
+#include <atomic>
+
+namespace kelvin {
+
+/// Set by SIGINT/SIGTERM; long-running commands poll it and save what they have.
+extern std::atomic<bool> g_interrupted;
+
+/// Exit codes shared by all commands.
+enum ExitCode { kExitOk = 0, kExitInputError = 1, kExitRunFailed = 2, kExitInterrupted = 130 };
+
+void register_simulate(CLI::App& app, int& exit_code);
+void register_check_material(CLI::App& app, int& exit_code);
+
+}  // namespace kelvin
