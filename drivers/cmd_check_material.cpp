@@ -42,7 +42,11 @@ int run_check(const std::string& target, const std::string& model_name,
     while (k < m->params().size() && m->params()[k].name != key) ++k;
     if (k == m->params().size())
       throw Error("model '" + m->name() + "' has no parameter '" + key + "'");
-    q[k] = std::stod(s.substr(eq + 1));
+    const std::string text = s.substr(eq + 1);
+    char* end = nullptr;
+    q[k] = std::strtod(text.c_str(), &end);
+    if (text.empty() || *end != '\0')
+      throw Error("--set " + key + ": '" + text + "' is not a number");
   }
   print_model(*m);
   std::string values;

@@ -13,6 +13,7 @@ void register_simulate(CLI::App& app, int& exit_code) {
   struct Args {
     std::string scenario, outdir;
     bool quiet = false;
+    double end = 0;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -22,11 +23,20 @@ void register_simulate(CLI::App& app, int& exit_code) {
   cmd->add_option("scenario", args->scenario, "scenario YAML file")->required();
   cmd->add_option("-o,--output", args->outdir,
                   "output directory (default: <scenario name>-out in the current directory)");
+  cmd->add_option("--end", args->end, "simulate up to this time (s) instead of time.end")
+      ->check(CLI::PositiveNumber);
   cmd->add_flag("-q,--quiet", args->quiet, "print only the summary line");
   cmd->callback([args, &exit_code] {
     Scenario scenario;
     try {
       scenario = load_scenario(args->scenario);
+      if (args->end > 0) {
+        scenario.time.end = args->end;
+        for (const auto& c : scenario.clamps)
+          if (c.motion->end_time() < args->end)
+            throw Error(fmt::format("--end {}: the motion of clamp '{}' ends at t = {} s", args->end,
+                                    c.name, c.motion->end_time()));
+      }
     } catch (const Error& e) {
       fmt::print(stderr, "error: {}\n", e.what());
       exit_code = kExitInputError;

@@ -56,6 +56,28 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
       for (int i = 0; i < 3; ++i) dof_[3 * a + i] = n_++;
   build_pattern();
   build_mass();
+  update_rest_tangents();
+}
+
+void FemModel::update_rest_tangents() {
+  const bool needed = std::any_of(terms_.begin(), terms_.end(),
+                                  [](const MaterialTerm& t) { return t.model->needs_rest_tangent(); });
+  if (!needed) return;
+  const int ne = mesh_.num_tets();
+  rest_tangent_.assign(ne, Mat9::Zero());
+  MaterialPoint mp;
+  MaterialResponse resp;
+  for (int e = 0; e < ne; ++e)
+    for (const auto& term : terms_) {
+      if (term.model->is_viscous()) continue;
+      mp.q = term.q.col(e).data();
+      mp.state = term.state.size() ? term.state.col(e).data() : nullptr;
+      mp.element = e;
+      if (!term.model->evaluate(mp, kTangent, resp))
+        throw Error(fmt::format("material '{}' cannot evaluate its rest tangent in element {}",
+                                term.model->name(), e));
+      rest_tangent_[e] += resp.dPdF;
+    }
 }
 
 void FemModel::build_pattern() {
@@ -113,21 +135,28 @@ void FemModel::build_mass() {
       (clamp_of_node_[el.nodes[a]] < 0 ? has_free : has_clamped) = true;
     }
     if (has_free && has_clamped) clamp_coupled_elements_.push_back(e);
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b) {
-        if (lumped_ && a != b) continue;
-        const double mab = lumped_ ? m / 4 : m / 20 * (a == b ? 2 : 1);
-        for (int i = 0; i < 3; ++i) {
-          const int idx = scatter_[static_cast<size_t>(e) * 144 + 12 * (3 * b + i) + 3 * a + i];
-          if (idx >= 0) mass_[idx] += mab;
-        }
-      }
+    const Eigen::Matrix<double, 12, 12> Me = element_mass(e);
+    const int* sc = &scatter_[static_cast<size_t>(e) * 144];
+    for (int k = 0; k < 144; ++k)
+      if (sc[k] >= 0 && Me(k % 12, k / 12) != 0) mass_[sc[k]] += Me(k % 12, k / 12);
   }
   if (lumped_) clamp_coupled_elements_.clear();
   f_gravity_.setZero(n_);
   for (int a = 0; a < nn; ++a)
     for (int i = 0; i < 3; ++i)
       if (dof(a, i) >= 0) f_gravity_[dof(a, i)] = node_mass_[a] * gravity_[i];
+}
+
+Eigen::Matrix<double, 12, 12> FemModel::element_mass(int e) const {
+  const double m = density_[e] * elements_[e].volume;
+  Eigen::Matrix<double, 12, 12> M = Eigen::Matrix<double, 12, 12>::Zero();
+  for (int a = 0; a < 4; ++a)
+    for (int b = 0; b < 4; ++b) {
+      if (lumped_ && a != b) continue;
+      const double mab = lumped_ ? m / 4 : m / 20 * (a == b ? 2 : 1);
+      for (int i = 0; i < 3; ++i) M(3 * a + i, 3 * b + i) = mab;
+    }
+  return M;
 }
 
 void FemModel::expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
@@ -211,7 +240,9 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
     mp.F = xe * el.G.transpose();
     mp.Fdot = ve * el.G.transpose();
     mp.element = e;
+    mp.rest_tangent = rest_tangent_.empty() ? nullptr : &rest_tangent_[e];
     Mat3 P = Mat3::Zero();
+    double mass_damping = 0;  // α of the α M v force, summed over terms
     if (req.stiffness) Ke.setZero();
     if (req.damping) De.setZero();
     for (const auto& term : terms_) {
@@ -228,6 +259,7 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
         return false;
       }
       P += resp.P;
+      if (const int k = term.model->mass_damping_param(); k >= 0) mass_damping += mp.q[k];
       if (r & kTangent) accumulate_element_matrix(el, resp.dPdF, 1.0, Ke);
       if (r & kRateTangent) accumulate_element_matrix(el, resp.dPdFdot, 1.0, De);
       if (r & kEnergy) {
@@ -240,8 +272,17 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
       out.failed_det = mp.F.determinant();
       return false;
     }
+    Eigen::Matrix<double, 12, 12> Me;
+    if (mass_damping != 0) {
+      Me = element_mass(e);
+      if (req.damping) De += mass_damping * Me;
+    }
     if (req.force) {
-      const Eigen::Matrix<double, 3, 4> fe = el.volume * P * el.G;
+      Eigen::Matrix<double, 3, 4> fe = el.volume * P * el.G;
+      if (mass_damping != 0) {
+        Eigen::Matrix<double, 12, 1> fm = mass_damping * Me * ve.reshaped();
+        fe += fm.reshaped(3, 4);
+      }
       for (int a = 0; a < 4; ++a)
         for (int i = 0; i < 3; ++i) {
           const int d = dof(el.nodes[a], i);

@@ -98,6 +98,13 @@ class FemModel {
   bool assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const AssemblyRequest& req,
                 AssemblyOutput& out) const;
 
+  /// Recomputes the elastic rest tangents C₀ (∂P/∂F at F = I per element) that
+  /// stiffness-proportional damping uses; call after changing elastic parameters.
+  void update_rest_tangents();
+
+  /// 12×12 mass matrix of element e (dof order 3a + i), lumped or consistent.
+  Eigen::Matrix<double, 12, 12> element_mass(int e) const;
+
   /// Kinetic energy ½ vᵀ M v over all nodes (clamped included) for full velocities.
   double kinetic_energy(const Eigen::Matrix3Xd& v) const;
   /// Gravitational potential −Σ m_a g·x_a for full positions.
@@ -123,6 +130,7 @@ class FemModel {
   Eigen::VectorXd node_mass_;       // lumped nodal masses (all nodes)
   Eigen::VectorXd f_gravity_;
   std::vector<int> clamp_coupled_elements_;  // elements with free and clamped nodes
+  std::vector<Mat9> rest_tangent_;  // per element, only when some term needs it
 };
 
 }  // namespace kelvin

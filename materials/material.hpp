@@ -43,6 +43,9 @@ struct MaterialPoint {
   const double* q = nullptr;      // this term's parameters, in params() order
   const double* state = nullptr;  // this element's fixed state (state_size() values), or null
   int element = -1;               // for messages
+  /// dP/dF at F = I of this element's elastic terms, supplied by the engine to
+  /// models that ask for it (needs_rest_tangent), null otherwise.
+  const Mat9* rest_tangent = nullptr;
 };
 
 struct MaterialResponse {
@@ -66,6 +69,12 @@ class Material {
   /// its size, and the value used where a scenario gives none.
   virtual int state_size() const { return 0; }
   virtual std::vector<double> default_state() const { return {}; }
+  /// Stiffness-proportional damping needs the elastic rest tangent C0 of the element
+  /// (MaterialPoint::rest_tangent).
+  virtual bool needs_rest_tangent() const { return false; }
+  /// Index of a parameter α such that the term also adds the mass-proportional
+  /// damping force α M v (which no stress can express), or −1.
+  virtual int mass_damping_param() const { return -1; }
   /// Fills the requested fields of `out` (others are left untouched, except that
   /// dPdq is resized). Returns false when the state is inadmissible (e.g. det F ≤ 0);
   /// callers turn that into a message naming the element.

@@ -1,1 +1,133 @@
+// The `kelvin` executable as users meet it: help, the bundled examples, and every
+// way a run can go wrong ending with a message, a non-zero exit and kept outputs.
 #include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "engine/csv.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Run {
+  int exit_code = -1;
+  std::string out;  // stdout and stderr together
+};
+
+Run kelvin(const std::string& args) {
+  const std::string cmd = std::string(KELVIN_BINARY) + " " + args + " 2>&1";
+  Run r;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  while (size_t n = fread(buf, 1, sizeof buf, p)) r.out.append(buf, n);
+  const int status = pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return r;
+}
+
+fs::path scratch(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("kelvin_test_cli_" + name);
+  fs::remove_all(dir);
+  return dir;
+}
+
+const std::string kData = KELVIN_TEST_DATA "/cli/";
+const std::string kExamples = KELVIN_SOURCE_DIR "/yaml/examples/";
+
+}  // namespace
+
+TEST(Cli, HelpListsSubcommands) {
+  const Run r = kelvin("--help");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("simulate"), std::string::npos);
+  EXPECT_NE(r.out.find("check-material"), std::string::npos);
+  const Run s = kelvin("simulate --help");
+  EXPECT_EQ(s.exit_code, 0);
+  EXPECT_NE(s.out.find("--end"), std::string::npos);
+}
+
+TEST(Cli, MissingScenarioIsAnInputError) {
+  const Run r = kelvin("simulate /nonexistent/scenario.yaml -o " + scratch("missing").string());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("/nonexistent/scenario.yaml"), std::string::npos) << r.out;
+}
+
+TEST(Cli, BadValueNamesFileLineColumnAndKey) {
+  const Run r = kelvin("simulate " + kData + "bad-density.yaml -o " + scratch("bad").string());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("bad-density.yaml:4:12: material.density"), std::string::npos) << r.out;
+}
+
+TEST(Cli, CantileverExampleRunsAndSags) {
+  const fs::path out = scratch("cantilever");
+  const Run r = kelvin("simulate " + kExamples + "cantilever-gravity.yaml --end 0.2 -q -o " +
+                       out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("completed t = 0.2"), std::string::npos) << r.out;
+  ASSERT_TRUE(fs::exists(out / "summary.txt"));
+  const auto tracks = kelvin::read_marker_tracks((out / "markers.csv").string());
+  ASSERT_EQ(tracks.times.size(), 21u);  // 100 Hz over [0, 0.2]
+  EXPECT_DOUBLE_EQ(tracks.times.back(), 0.2);
+  // Released from rest under gravity, every marker moves down.
+  for (int m = 0; m < static_cast<int>(tracks.names.size()); ++m)
+    EXPECT_LT(tracks.xyz(3 * m + 2, 20), tracks.xyz(3 * m + 2, 0)) << tracks.names[m];
+  bool has_pvd = false;
+  for (const auto& f : fs::directory_iterator(out)) has_pvd |= f.path().extension() == ".pvd";
+  EXPECT_TRUE(has_pvd);
+}
+
+TEST(Cli, StepLimitStopsWithTimeReachedAndKeepsFrames) {
+  const fs::path out = scratch("steplimit");
+  const Run r = kelvin("simulate " + kData + "step-limit.yaml -q -o " + out.string());
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("t = "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("step"), std::string::npos) << r.out;
+  const auto tracks = kelvin::read_marker_tracks((out / "markers.csv").string());
+  EXPECT_GT(tracks.times.size(), 1u);
+  EXPECT_LT(tracks.times.back(), 1.0);
+  EXPECT_TRUE(fs::exists(out / "summary.txt"));
+}
+
+TEST(Cli, CollapsingBodyStopsWithMessageAndKeepsFrames) {
+  const fs::path out = scratch("collapse");
+  const Run r = kelvin("simulate " + kData + "collapse.yaml -q -o " + out.string());
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("FAILED at t = "), std::string::npos) << r.out;
+  const auto tracks = kelvin::read_marker_tracks((out / "markers.csv").string());
+  EXPECT_GT(tracks.times.size(), 1u);
+  EXPECT_LT(tracks.times.back(), 2.0);
+}
+
+TEST(Cli, CheckMaterialListsAndChecksBuiltins) {
+  const Run list = kelvin("check-material --list");
+  EXPECT_EQ(list.exit_code, 0) << list.out;
+  EXPECT_NE(list.out.find("neo-hookean"), std::string::npos);
+  EXPECT_NE(list.out.find("power-law"), std::string::npos);
+  const Run bad = kelvin("check-material no-such-model");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.out.find("no-such-model"), std::string::npos);
+  const Run badset = kelvin("check-material neo-hookean --set mu=abc");
+  EXPECT_EQ(badset.exit_code, 1) << badset.out;
+}
+
+TEST(Cli, CheckMaterialPassesOnEveryBuiltin) {
+  const Run list = kelvin("check-material --list");
+  ASSERT_EQ(list.exit_code, 0);
+  std::istringstream lines(list.out);
+  int models = 0;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty() || line[0] == ' ') continue;  // parameter rows are indented
+    const std::string name = line.substr(0, line.find(' '));
+    const Run r = kelvin("check-material " + name);
+    EXPECT_EQ(r.exit_code, 0) << r.out;
+    EXPECT_NE(r.out.find(" 0 failed"), std::string::npos) << r.out;
+    ++models;
+  }
+  EXPECT_GE(models, 3);
+}
