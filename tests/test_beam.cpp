@@ -11,56 +11,12 @@
 #include "engine/mesh.hpp"
 #include "engine/selection.hpp"
 #include "engine/static_solver.hpp"
+#include "tests/cantilever_fixture.hpp"
 
 using namespace kelvin;
+using namespace kelvin::test;
 
 namespace {
-
-// Slender square bar (L/h = 20: shear and rotary-inertia corrections < 0.3%).
-constexpr double kLength = 0.2, kHeight = 0.01, kE = 1e8, kPoisson = 0.3, kRho = 1000, kG = 9.81;
-
-struct Beam {
-  Mesh mesh;
-  std::unique_ptr<FemModel> model;
-  int tip_node = -1;  // a node on the neutral axis at the free end... or nearest
-};
-
-Beam make_beam(int cells_across, double gravity) {
-  Beam b;
-  b.mesh = generate_box({0, 0, 0}, {kLength, kHeight, kHeight}, kHeight / cells_across);
-  const double lambda = kE * kPoisson / ((1 + kPoisson) * (1 - 2 * kPoisson));
-  const double mu = kE / (2 * (1 + kPoisson));
-  const int ne = b.mesh.num_tets();
-  std::vector<MaterialTerm> terms{
-      {create_builtin_material("neo-hookean"), Eigen::Vector2d(lambda, mu).replicate(1, ne)}};
-  NodeSelection root;
-  root.axis = 0;
-  root.at = 0;
-  b.model = std::make_unique<FemModel>(b.mesh, std::move(terms), Eigen::VectorXd::Constant(ne, kRho),
-                                       Eigen::Vector3d(0, 0, -gravity),
-                                       std::vector<ClampBinding>{{"root", select_nodes(b.mesh, root),
-                                                                  std::make_shared<FixedMotion>()}},
-                                       true);
-  double best = INFINITY;
-  for (int a = 0; a < b.mesh.num_nodes(); ++a) {
-    const double d = (b.mesh.nodes.col(a) - Eigen::Vector3d(kLength, kHeight / 2, kHeight / 2)).norm();
-    if (d < best) best = d, b.tip_node = a;
-  }
-  return b;
-}
-
-/// Mean vertical displacement of the free end face (less sensitive to the local
-/// mesh than a single node).
-double tip_deflection(const Beam& b, const Eigen::VectorXd& x) {
-  double sum = 0;
-  int count = 0;
-  for (int a = 0; a < b.mesh.num_nodes(); ++a)
-    if (std::abs(b.mesh.nodes(0, a) - kLength) < 1e-12) {
-      sum += x[b.model->dof(a, 2)] - b.mesh.nodes(2, a);
-      ++count;
-    }
-  return sum / count;
-}
 
 struct Richardson {
   double order, limit;
@@ -109,67 +65,6 @@ TEST(Cantilever, StaticTipDeflectionConvergesToEulerBernoulli) {
   EXPECT_NEAR(R.limit, theory, 0.02 * theory);
 }
 
-namespace {
-
-struct FreeVibration {
-  std::vector<double> t, tip, energy;
-};
-
-/// Releases the beam from its static deflection under gravity with gravity then
-/// switched off (undamped), sampling tip deflection and total energy.
-FreeVibration release(int cells_across, double duration, int samples, double rtol) {
-  Beam loaded = make_beam(cells_across, kG);
-  Eigen::VectorXd x0 = rigid_initial_guess(*loaded.model, 0.0);
-  const StaticResult r = solve_static(*loaded.model, 0.0, x0);
-  EXPECT_TRUE(r.converged) << r.message;
-  Beam free = make_beam(cells_across, 0.0);
-  IntegratorOptions opt;
-  opt.rtol = rtol;
-  opt.atol = 1e-12;
-  opt.velocity_atol_scale = 100;
-  IdasIntegrator ida(*free.model, opt);
-  const Eigen::VectorXd v0 = Eigen::VectorXd::Zero(x0.size());
-  ida.initialize(0.0, x0, v0);
-  FreeVibration out;
-  Eigen::Matrix3Xd x, v;
-  AssemblyOutput asm_out;
-  AssemblyRequest energy;
-  energy.force = false;
-  energy.energy = true;
-  for (int k = 0; k <= samples; ++k) {
-    const double t = duration * k / samples;
-    if (k > 0) EXPECT_TRUE(ida.advance_to(t, duration)) << ida.error();
-    const Eigen::VectorXd& xs = k > 0 ? ida.positions() : x0;
-    const Eigen::VectorXd& vs = k > 0 ? ida.velocities() : v0;
-    free.model->expand(t, xs.data(), vs.data(), x, v);
-    free.model->assemble(x, v, energy, asm_out);
-    out.t.push_back(t);
-    out.tip.push_back(tip_deflection(free, xs));
-    out.energy.push_back(asm_out.energy + free.model->kinetic_energy(v));
-  }
-  return out;
-}
-
-/// Frequency from the mean spacing of the zero crossings of the tip deflection.
-double crossing_frequency(const FreeVibration& fv) {
-  std::vector<double> crossings;
-  for (size_t k = 1; k < fv.t.size(); ++k)
-    if ((fv.tip[k - 1] < 0) != (fv.tip[k] < 0)) {
-      const double s = fv.tip[k - 1] / (fv.tip[k - 1] - fv.tip[k]);
-      crossings.push_back(fv.t[k - 1] + s * (fv.t[k] - fv.t[k - 1]));
-    }
-  EXPECT_GE(crossings.size(), 4u);
-  const double half_period = (crossings.back() - crossings.front()) / (crossings.size() - 1);
-  return 1.0 / (2 * half_period);
-}
-
-double theory_frequency() {
-  const double beta = 1.8751040687;  // first root of 1 + cos β cosh β = 0
-  const double I = std::pow(kHeight, 4) / 12, A = kHeight * kHeight;
-  return beta * beta / (2 * M_PI) * std::sqrt(kE * I / (kRho * A * std::pow(kLength, 4)));
-}
-
-}  // namespace
 
 TEST(Cantilever, FirstBendingFrequencyConvergesToEulerBernoulli) {
   const double f_theory = theory_frequency();

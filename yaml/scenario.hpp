@@ -21,6 +21,7 @@ struct MaterialTermSpec {
   std::string model;                     // e.g. "neo-hookean", "newtonian", "power-law"
   std::map<std::string, double> params;  // every parameter of the model, defaults filled in
   std::string plugin;                    // path of a plugin library ("" for built-ins)
+  std::vector<double> state;             // per-element fixed state; empty = model's default
 };
 
 struct MaterialSpec {
@@ -32,8 +33,8 @@ struct MaterialSpec {
 struct ClampSpec {
   std::string name;
   NodeSelection selection;
-  std::vector<int> nodes;                // resolved, non-empty
-  std::shared_ptr<RigidMotion> motion;   // FixedMotion when none is given
+  std::vector<int> nodes;               // resolved, non-empty
+  std::shared_ptr<RigidMotion> motion;  // FixedMotion when none is given
 };
 
 struct MarkersSpec {
@@ -49,7 +50,7 @@ struct TimeSpec {
 
 struct SolverSpec {
   double rtol = 1e-6;
-  double atol = 1e-9;        // positions (m); velocities use atol × velocity_atol_scale
+  double atol = 1e-9;  // positions (m); velocities use atol × velocity_atol_scale
   double velocity_atol_scale = 100;
   int max_order = 5;
   long max_steps = 1000000;  // over the whole run

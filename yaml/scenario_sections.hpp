@@ -1,0 +1,19 @@
+#pragma once
+// The sections of a scenario file, each read and validated on its own (internal to
+// the loader; the public contract is yaml/scenario.hpp).
+#include <yaml-cpp/yaml.h>
+
+#include <vector>
+
+#include "yaml/scenario.hpp"
+#include "yaml/yaml_util.hpp"
+
+namespace kelvin::scenario_detail {
+
+MaterialSpec load_material(const yamlutil::Doc& d, const YAML::Node& node);
+Mesh load_mesh(const yamlutil::Doc& d, const YAML::Node& node);
+std::vector<ClampSpec> load_clamps(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh,
+                                   const TimeSpec& time);
+MarkersSpec load_markers(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh);
+
+}  // namespace kelvin::scenario_detail
