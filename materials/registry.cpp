@@ -7,6 +7,7 @@
 #include "materials/neo_hookean.hpp"
 #include "materials/plugin_loader.hpp"
 #include "materials/power_law.hpp"
+#include "materials/rayleigh.hpp"
 
 namespace kelvin {
 namespace {
@@ -18,6 +19,7 @@ const std::map<std::string, Factory>& factories() {
       {"neo-hookean", [] { return std::make_unique<NeoHookean>(); }},
       {"newtonian", [] { return std::make_unique<NewtonianViscosity>(); }},
       {"power-law", [] { return std::make_unique<PowerLawViscosity>(); }},
+      {"rayleigh", [] { return std::make_unique<RayleighDamping>(); }},
   };
   return f;
 }
