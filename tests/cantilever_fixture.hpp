@@ -94,7 +94,9 @@ inline FreeVibration release(int cells_across, double duration, int samples, dou
   energy.energy = true;
   for (int k = 0; k <= samples; ++k) {
     const double t = duration * k / samples;
-    if (k > 0) EXPECT_TRUE(ida.advance_to(t, duration)) << ida.error();
+    if (k > 0) {
+      EXPECT_TRUE(ida.advance_to(t, duration)) << ida.error();
+    }
     const Eigen::VectorXd& xs = k > 0 ? ida.positions() : x0;
     const Eigen::VectorXd& vs = k > 0 ? ida.velocities() : v0;
     free.model->expand(t, xs.data(), vs.data(), x, v);

@@ -14,14 +14,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
+struct CliRun {
   int exit_code = -1;
   std::string out;  // stdout and stderr together
 };
 
-Run kelvin(const std::string& args) {
+CliRun run_kelvin(const std::string& args) {
   const std::string cmd = std::string(KELVIN_BINARY) + " " + args + " 2>&1";
-  Run r;
+  CliRun r;
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
   char buf[4096];
@@ -43,30 +43,30 @@ const std::string kExamples = KELVIN_SOURCE_DIR "/yaml/examples/";
 }  // namespace
 
 TEST(Cli, HelpListsSubcommands) {
-  const Run r = kelvin("--help");
+  const CliRun r = run_kelvin("--help");
   EXPECT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("simulate"), std::string::npos);
   EXPECT_NE(r.out.find("check-material"), std::string::npos);
-  const Run s = kelvin("simulate --help");
+  const CliRun s = run_kelvin("simulate --help");
   EXPECT_EQ(s.exit_code, 0);
   EXPECT_NE(s.out.find("--end"), std::string::npos);
 }
 
 TEST(Cli, MissingScenarioIsAnInputError) {
-  const Run r = kelvin("simulate /nonexistent/scenario.yaml -o " + scratch("missing").string());
+  const CliRun r = run_kelvin("simulate /nonexistent/scenario.yaml -o " + scratch("missing").string());
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("/nonexistent/scenario.yaml"), std::string::npos) << r.out;
 }
 
 TEST(Cli, BadValueNamesFileLineColumnAndKey) {
-  const Run r = kelvin("simulate " + kData + "bad-density.yaml -o " + scratch("bad").string());
+  const CliRun r = run_kelvin("simulate " + kData + "bad-density.yaml -o " + scratch("bad").string());
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("bad-density.yaml:4:12: material.density"), std::string::npos) << r.out;
 }
 
 TEST(Cli, CantileverExampleRunsAndSags) {
   const fs::path out = scratch("cantilever");
-  const Run r = kelvin("simulate " + kExamples + "cantilever-gravity.yaml --end 0.2 -q -o " +
+  const CliRun r = run_kelvin("simulate " + kExamples + "cantilever-gravity.yaml --end 0.2 -q -o " +
                        out.string());
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("completed t = 0.2"), std::string::npos) << r.out;
@@ -84,7 +84,7 @@ TEST(Cli, CantileverExampleRunsAndSags) {
 
 TEST(Cli, StepLimitStopsWithTimeReachedAndKeepsFrames) {
   const fs::path out = scratch("steplimit");
-  const Run r = kelvin("simulate " + kData + "step-limit.yaml -q -o " + out.string());
+  const CliRun r = run_kelvin("simulate " + kData + "step-limit.yaml -q -o " + out.string());
   EXPECT_EQ(r.exit_code, 2) << r.out;
   EXPECT_NE(r.out.find("t = "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("step"), std::string::npos) << r.out;
@@ -96,7 +96,7 @@ TEST(Cli, StepLimitStopsWithTimeReachedAndKeepsFrames) {
 
 TEST(Cli, CollapsingBodyStopsWithMessageAndKeepsFrames) {
   const fs::path out = scratch("collapse");
-  const Run r = kelvin("simulate " + kData + "collapse.yaml -q -o " + out.string());
+  const CliRun r = run_kelvin("simulate " + kData + "collapse.yaml -q -o " + out.string());
   EXPECT_EQ(r.exit_code, 2) << r.out;
   EXPECT_NE(r.out.find("FAILED at t = "), std::string::npos) << r.out;
   const auto tracks = kelvin::read_marker_tracks((out / "markers.csv").string());
@@ -105,26 +105,26 @@ TEST(Cli, CollapsingBodyStopsWithMessageAndKeepsFrames) {
 }
 
 TEST(Cli, CheckMaterialListsAndChecksBuiltins) {
-  const Run list = kelvin("check-material --list");
+  const CliRun list = run_kelvin("check-material --list");
   EXPECT_EQ(list.exit_code, 0) << list.out;
   EXPECT_NE(list.out.find("neo-hookean"), std::string::npos);
   EXPECT_NE(list.out.find("power-law"), std::string::npos);
-  const Run bad = kelvin("check-material no-such-model");
+  const CliRun bad = run_kelvin("check-material no-such-model");
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.out.find("no-such-model"), std::string::npos);
-  const Run badset = kelvin("check-material neo-hookean --set mu=abc");
+  const CliRun badset = run_kelvin("check-material neo-hookean --set mu=abc");
   EXPECT_EQ(badset.exit_code, 1) << badset.out;
 }
 
 TEST(Cli, CheckMaterialPassesOnEveryBuiltin) {
-  const Run list = kelvin("check-material --list");
+  const CliRun list = run_kelvin("check-material --list");
   ASSERT_EQ(list.exit_code, 0);
   std::istringstream lines(list.out);
   int models = 0;
   for (std::string line; std::getline(lines, line);) {
     if (line.empty() || line[0] == ' ') continue;  // parameter rows are indented
     const std::string name = line.substr(0, line.find(' '));
-    const Run r = kelvin("check-material " + name);
+    const CliRun r = run_kelvin("check-material " + name);
     EXPECT_EQ(r.exit_code, 0) << r.out;
     EXPECT_NE(r.out.find(" 0 failed"), std::string::npos) << r.out;
     ++models;
