@@ -1,1 +1,170 @@
-// placeholder: implemented in a following commit
+#include "engine/csv.hpp"
+
+#include <fmt/format.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <set>
+
+#include "engine/error.hpp"
+
+namespace kelvin {
+namespace {
+
+/// Lines of a CSV file with their 1-based numbers; blank and '#' lines dropped,
+/// CR of CRLF endings removed.
+std::vector<std::pair<int, std::string>> read_lines(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error(fmt::format("{}: cannot open ({})", path, std::strerror(errno)));
+  std::vector<std::pair<int, std::string>> lines;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    const auto first = line.find_first_not_of(" \t");
+    if (first == std::string::npos || line[first] == '#') continue;
+    lines.emplace_back(n, line);
+  }
+  return lines;
+}
+
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> cells;
+  size_t start = 0;
+  for (;;) {
+    const size_t comma = line.find(',', start);
+    std::string cell = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    const auto a = cell.find_first_not_of(" \t"), b = cell.find_last_not_of(" \t");
+    cells.push_back(a == std::string::npos ? "" : cell.substr(a, b - a + 1));
+    if (comma == std::string::npos) return cells;
+    start = comma + 1;
+  }
+}
+
+bool parse_number(const std::string& s, double& v) {
+  if (s.empty()) return false;
+  char* end = nullptr;
+  v = std::strtod(s.c_str(), &end);
+  return *end == '\0';
+}
+
+/// True when the row's cells after the first are all numbers (i.e. not a header).
+bool is_numeric_row(const std::vector<std::string>& cells, size_t from) {
+  double v;
+  for (size_t k = from; k < cells.size(); ++k)
+    if (!parse_number(cells[k], v)) return false;
+  return true;
+}
+
+double number(const std::string& path, int line, const std::string& cell, const char* what) {
+  double v;
+  if (!parse_number(cell, v) || !std::isfinite(v))
+    throw Error(fmt::format("{}:{}: {} '{}' is not a finite number", path, line, what, cell));
+  return v;
+}
+
+}  // namespace
+
+MarkerRest read_marker_rest(const std::string& path) {
+  MarkerRest out;
+  std::vector<Eigen::Vector3d> pos;
+  std::set<std::string> seen;
+  for (const auto& [n, line] : read_lines(path)) {
+    const auto cells = split(line);
+    if (cells.size() != 4)
+      throw Error(fmt::format("{}:{}: expected 4 columns name,x,y,z, found {}", path, n, cells.size()));
+    if (pos.empty() && out.names.empty() && !is_numeric_row(cells, 1)) continue;  // header
+    if (cells[0].empty()) throw Error(fmt::format("{}:{}: empty marker name", path, n));
+    if (!seen.insert(cells[0]).second)
+      throw Error(fmt::format("{}:{}: marker '{}' appears twice", path, n, cells[0]));
+    out.names.push_back(cells[0]);
+    pos.emplace_back(number(path, n, cells[1], "x"), number(path, n, cells[2], "y"),
+                     number(path, n, cells[3], "z"));
+  }
+  if (pos.empty()) throw Error(path + ": no marker rows");
+  out.positions.resize(3, pos.size());
+  for (size_t i = 0; i < pos.size(); ++i) out.positions.col(i) = pos[i];
+  return out;
+}
+
+MarkerTracks read_marker_tracks(const std::string& path) {
+  const auto lines = read_lines(path);
+  if (lines.empty()) throw Error(path + ": empty file (expected a header t,<name>_x,<name>_y,...)");
+  const auto header = split(lines[0].second);
+  const int hn = lines[0].first;
+  if (header[0] != "t" || (header.size() - 1) % 3 != 0)
+    throw Error(fmt::format("{}:{}: header must be t followed by <name>_x,<name>_y,<name>_z triplets",
+                            path, hn));
+  MarkerTracks out;
+  for (size_t k = 1; k < header.size(); k += 3) {
+    const std::string& h = header[k];
+    const std::string name = h.size() > 2 ? h.substr(0, h.size() - 2) : "";
+    if (name.empty() || h.substr(h.size() - 2) != "_x" || header[k + 1] != name + "_y" ||
+        header[k + 2] != name + "_z")
+      throw Error(fmt::format("{}:{}: columns {}–{} must be {}_x,{}_y,{}_z", path, hn, k + 1, k + 3,
+                              name.empty() ? "<name>" : name, name, name));
+    out.names.push_back(name);
+  }
+  const int cols = static_cast<int>(header.size());
+  std::vector<std::vector<double>> rows;
+  for (size_t r = 1; r < lines.size(); ++r) {
+    const auto& [n, line] = lines[r];
+    const auto cells = split(line);
+    if (static_cast<int>(cells.size()) != cols)
+      throw Error(fmt::format("{}:{}: {} columns, the header has {}", path, n, cells.size(), cols));
+    std::vector<double> row(cols);
+    row[0] = number(path, n, cells[0], "time");
+    if (!out.times.empty() && !(row[0] > out.times.back()))
+      throw Error(fmt::format("{}:{}: time {} does not increase (previous row: {})", path, n, row[0],
+                              out.times.back()));
+    for (int k = 1; k < cols; ++k) {
+      double v;
+      if (cells[k].empty()) v = std::numeric_limits<double>::quiet_NaN();  // occluded
+      else if (!parse_number(cells[k], v) || std::isinf(v))
+        throw Error(fmt::format("{}:{}: column {} ({}) '{}' is not a number", path, n, k + 1,
+                                header[k], cells[k]));
+      row[k] = v;
+    }
+    out.times.push_back(row[0]);
+    rows.push_back(std::move(row));
+  }
+  if (rows.empty()) throw Error(path + ": no data rows after the header");
+  out.xyz.resize(cols - 1, rows.size());
+  for (size_t f = 0; f < rows.size(); ++f)
+    for (int k = 1; k < cols; ++k) out.xyz(k - 1, f) = rows[f][k];
+  return out;
+}
+
+ClampSamples read_clamp_csv(const std::string& path) {
+  ClampSamples out;
+  for (const auto& [n, line] : read_lines(path)) {
+    const auto cells = split(line);
+    if (cells.size() != 8)
+      throw Error(fmt::format("{}:{}: expected 8 columns t,tx,ty,tz,qw,qx,qy,qz, found {}", path, n,
+                              cells.size()));
+    if (out.t.empty() && !is_numeric_row(cells, 0)) continue;  // header
+    double v[8];
+    static const char* names[8] = {"t", "tx", "ty", "tz", "qw", "qx", "qy", "qz"};
+    for (int k = 0; k < 8; ++k) v[k] = number(path, n, cells[k], names[k]);
+    if (!out.t.empty() && !(v[0] > out.t.back()))
+      throw Error(fmt::format("{}:{}: time {} does not increase (previous row: {})", path, n, v[0],
+                              out.t.back()));
+    Eigen::Vector4d q(v[4], v[5], v[6], v[7]);
+    if (!(q.norm() > 1e-12))
+      throw Error(fmt::format("{}:{}: the quaternion is zero", path, n));
+    q.normalize();
+    // q and −q are the same rotation; keep neighbours on one side so that the
+    // spline through the components does not swing through zero.
+    if (!out.quaternion_wxyz.empty() && q.dot(out.quaternion_wxyz.back()) < 0) q = -q;
+    out.t.push_back(v[0]);
+    out.translation.emplace_back(v[1], v[2], v[3]);
+    out.quaternion_wxyz.push_back(q);
+  }
+  if (out.t.size() < 2) throw Error(path + ": a clamp trajectory needs at least 2 rows");
+  return out;
+}
+
+}  // namespace kelvin

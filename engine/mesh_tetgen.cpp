@@ -1,1 +1,63 @@
-// placeholder: implemented in a following commit
+// TetGen .node/.ele reader, and read_mesh's dispatch on the file extension.
+#include <filesystem>
+
+#include "engine/mesh.hpp"
+#include "engine/mesh_text_reader.hpp"
+
+namespace kelvin {
+
+Mesh read_tetgen(const std::string& path) {
+  const std::filesystem::path p(path);
+  const std::string stem = (p.parent_path() / p.stem()).string();
+  const std::string node_path = stem + ".node", ele_path = stem + ".ele";
+  Mesh m;
+  m.source = ele_path;
+
+  MeshTextReader nr(node_path);
+  const auto nh = nr.numbers<long>(nr.require_line("the .node header", true), 4, "the .node header");
+  if (nh[1] != 3) nr.fail("only 3-D .node files are supported");
+  const long nn = nh[0];
+  if (nn <= 0) nr.fail("no nodes");
+  m.nodes.resize(3, nn);
+  long first = -1;
+  for (long k = 0; k < nn; ++k) {
+    const auto v = nr.numbers<double>(nr.require_line("a node", true), 4, "a node (id x y z)", true);
+    const long id = static_cast<long>(v[0]);
+    if (k == 0) {
+      first = id;
+      if (first != 0 && first != 1) nr.fail("node numbering must start at 0 or 1");
+    }
+    if (id != first + k) nr.fail(fmt::format("node {} out of sequence (expected {})", id, first + k));
+    m.nodes.col(k) << v[1], v[2], v[3];
+  }
+
+  MeshTextReader er(ele_path);
+  const auto eh = er.numbers<long>(er.require_line("the .ele header", true), 3, "the .ele header");
+  if (eh[1] != 4) er.fail("only 4-node tetrahedra are supported (second header value must be 4)");
+  const long ne = eh[0];
+  if (ne <= 0) er.fail("no tetrahedra");
+  m.tets.resize(4, ne);
+  m.region.assign(ne, 0);
+  for (long e = 0; e < ne; ++e) {
+    const auto v = er.numbers<long>(er.require_line("a tetrahedron", true), 5 + eh[2], "a tetrahedron");
+    for (int k = 0; k < 4; ++k) {
+      const long node = v[1 + k] - first;
+      if (node < 0 || node >= nn)
+        er.fail(fmt::format("tetrahedron {} refers to node {}, but {} defines nodes {}..{}", v[0],
+                            v[1 + k], node_path, first, first + nn - 1));
+      m.tets(k, e) = static_cast<int>(node);
+    }
+    if (eh[2] > 0) m.region[e] = static_cast<int>(v[5]);
+  }
+  return m;
+}
+
+Mesh read_mesh(const std::string& path) {
+  const std::string ext = std::filesystem::path(path).extension().string();
+  if (ext == ".msh") return read_gmsh(path);
+  if (ext == ".node" || ext == ".ele") return read_tetgen(path);
+  throw Error(path + ": unknown mesh format '" + ext +
+              "' (kelvin reads Gmsh .msh 2.2/4.1 and TetGen .node/.ele)");
+}
+
+}  // namespace kelvin

@@ -1,1 +1,145 @@
-// placeholder: implemented in a following commit
+#include "engine/rigid_motion.hpp"
+
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "engine/error.hpp"
+
+namespace kelvin {
+
+double RigidMotion::end_time() const { return std::numeric_limits<double>::infinity(); }
+
+SinusoidMotion::SinusoidMotion(std::vector<Sinusoid> translation, std::vector<Sinusoid> rotation,
+                               Eigen::Vector3d axis, Eigen::Vector3d center)
+    : translation_(std::move(translation)), rotation_(std::move(rotation)), center_(center) {
+  axis_ = axis.norm() > 0 ? axis.normalized() : Eigen::Vector3d::UnitZ();
+  for (auto& s : translation_)
+    if (s.direction.norm() > 0) s.direction.normalize();
+}
+
+RigidPose SinusoidMotion::at(double t) const {
+  RigidPose p;
+  for (const auto& s : translation_) {
+    const double w = 2 * M_PI * s.frequency, a = w * t + s.phase;
+    p.d += s.amplitude * std::sin(a) * s.direction;
+    p.ddot += s.amplitude * w * std::cos(a) * s.direction;
+    p.dddot -= s.amplitude * w * w * std::sin(a) * s.direction;
+  }
+  if (rotation_.empty()) return p;
+  double th = 0, th1 = 0, th2 = 0;  // angle and its time derivatives
+  for (const auto& s : rotation_) {
+    const double w = 2 * M_PI * s.frequency, a = w * t + s.phase;
+    th += s.amplitude * std::sin(a);
+    th1 += s.amplitude * w * std::cos(a);
+    th2 -= s.amplitude * w * w * std::sin(a);
+  }
+  // Rodrigues: R = I + sin θ K + (1 − cos θ) K², differentiated in θ exactly.
+  Eigen::Matrix3d K;
+  K << 0, -axis_.z(), axis_.y(), axis_.z(), 0, -axis_.x(), -axis_.y(), axis_.x(), 0;
+  const Eigen::Matrix3d K2 = K * K;
+  const double s = std::sin(th), c = std::cos(th);
+  const Eigen::Matrix3d dR = c * K + s * K2, d2R = -s * K + c * K2;
+  p.R = Eigen::Matrix3d::Identity() + s * K + (1 - c) * K2;
+  p.Rdot = dR * th1;
+  p.Rddot = d2R * th1 * th1 + dR * th2;
+  // About `center`: x = R (X − c) + c + d  ⇒  offset c − R c.
+  p.d += center_ - p.R * center_;
+  p.ddot -= p.Rdot * center_;
+  p.dddot -= p.Rddot * center_;
+  return p;
+}
+
+namespace {
+
+/// Natural cubic spline second derivatives of each row of `y` over knots t.
+Eigen::MatrixXd spline_second_derivatives(const std::vector<double>& t, const Eigen::MatrixXd& y) {
+  const int n = static_cast<int>(t.size());
+  Eigen::MatrixXd m = Eigen::MatrixXd::Zero(y.rows(), n);
+  if (n < 3) return m;
+  // Thomas algorithm on the interior equations (natural ends: m₀ = m_{n−1} = 0).
+  std::vector<double> diag(n), upper(n);
+  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(y.rows(), n);
+  for (int i = 1; i < n - 1; ++i) {
+    const double h0 = t[i] - t[i - 1], h1 = t[i + 1] - t[i];
+    diag[i] = 2 * (h0 + h1);
+    upper[i] = h1;
+    rhs.col(i) = 6 * ((y.col(i + 1) - y.col(i)) / h1 - (y.col(i) - y.col(i - 1)) / h0);
+    if (i > 1) {
+      const double lower = h0, f = lower / diag[i - 1];
+      diag[i] -= f * upper[i - 1];
+      rhs.col(i) -= f * rhs.col(i - 1);
+    }
+  }
+  for (int i = n - 2; i >= 1; --i) {
+    Eigen::VectorXd r = rhs.col(i);
+    if (i < n - 2) r -= upper[i] * m.col(i + 1);
+    m.col(i) = r / diag[i];
+  }
+  return m;
+}
+
+/// Bilinear form with M(q) = B(q, q) the unnormalised rotation matrix of q = (w, x, y, z).
+Eigen::Matrix3d rotation_bilinear(const Eigen::Vector4d& a, const Eigen::Vector4d& b) {
+  auto sym = [&](int i, int j) { return 0.5 * (a[i] * b[j] + a[j] * b[i]); };
+  const int w = 0, x = 1, y = 2, z = 3;
+  Eigen::Matrix3d M;
+  M << sym(w, w) + sym(x, x) - sym(y, y) - sym(z, z), 2 * (sym(x, y) - sym(w, z)),
+      2 * (sym(x, z) + sym(w, y)), 2 * (sym(x, y) + sym(w, z)),
+      sym(w, w) - sym(x, x) + sym(y, y) - sym(z, z), 2 * (sym(y, z) - sym(w, x)),
+      2 * (sym(x, z) - sym(w, y)), 2 * (sym(y, z) + sym(w, x)),
+      sym(w, w) - sym(x, x) - sym(y, y) + sym(z, z);
+  return M;
+}
+
+}  // namespace
+
+SampledMotion::SampledMotion(std::vector<double> t, std::vector<Eigen::Vector3d> d,
+                             std::vector<Eigen::Vector4d> q_wxyz)
+    : t_(std::move(t)) {
+  const int n = static_cast<int>(t_.size());
+  if (n < 2 || static_cast<int>(d.size()) != n || static_cast<int>(q_wxyz.size()) != n)
+    throw Error("a sampled clamp motion needs at least 2 samples of time, translation and rotation");
+  values_.resize(7, n);
+  for (int i = 0; i < n; ++i) {
+    values_.col(i).head<3>() = d[i];
+    values_.col(i).tail<4>() = q_wxyz[i];
+  }
+  second_ = spline_second_derivatives(t_, values_);
+}
+
+RigidPose SampledMotion::at(double t) const {
+  // Outside the samples the clamp holds its end pose (zero velocity): scenarios are
+  // validated to stay inside, this only keeps a stray evaluation well defined.
+  const double tc = std::clamp(t, t_.front(), t_.back());
+  const bool held = t != tc;
+  const int i = std::clamp(static_cast<int>(std::upper_bound(t_.begin(), t_.end(), tc) - t_.begin()) - 1,
+                           0, static_cast<int>(t_.size()) - 2);
+  const double h = t_[i + 1] - t_[i], a = (t_[i + 1] - tc) / h, b = (tc - t_[i]) / h;
+  const Eigen::VectorXd y0 = values_.col(i), y1 = values_.col(i + 1);
+  const Eigen::VectorXd m0 = second_.col(i), m1 = second_.col(i + 1);
+  Eigen::VectorXd v = a * y0 + b * y1 + ((a * a * a - a) * m0 + (b * b * b - b) * m1) * (h * h / 6);
+  Eigen::VectorXd v1 = (y1 - y0) / h + (-(3 * a * a - 1) * m0 + (3 * b * b - 1) * m1) * (h / 6);
+  Eigen::VectorXd v2 = a * m0 + b * m1;
+  if (held) v1.setZero(), v2.setZero();
+
+  RigidPose p;
+  p.d = v.head<3>();
+  p.ddot = v1.head<3>();
+  p.dddot = v2.head<3>();
+  const Eigen::Vector4d q = v.tail<4>(), q1 = v1.tail<4>(), q2 = v2.tail<4>();
+  // R = M(q)/|q|² is a rotation for any non-zero q; differentiate the quotient.
+  const double n = q.squaredNorm(), n1 = 2 * q.dot(q1), n2 = 2 * (q1.dot(q1) + q.dot(q2));
+  const Eigen::Matrix3d M = rotation_bilinear(q, q);
+  const Eigen::Matrix3d M1 = 2 * rotation_bilinear(q, q1);
+  const Eigen::Matrix3d M2 = 2 * rotation_bilinear(q, q2) + 2 * rotation_bilinear(q1, q1);
+  p.R = M / n;
+  p.Rdot = (M1 - p.R * n1) / n;
+  p.Rddot = (M2 - 2 * p.Rdot * n1 - p.R * n2) / n;
+  return p;
+}
+
+}  // namespace kelvin
