@@ -1,5 +1,6 @@
 #include "engine/markers.hpp"
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <fmt/format.h>
 

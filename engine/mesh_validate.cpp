@@ -1,3 +1,4 @@
+#include <Eigen/Geometry>
 #include <fmt/format.h>
 
 #include <algorithm>

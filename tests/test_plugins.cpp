@@ -44,7 +44,7 @@ TEST(Plugins, ExamplePluginLoadsAndPassesDerivativeChecks) {
 }
 
 TEST(Plugins, ExamplePluginWithoutStiffeningIsLinearElasticAtSmallStrain) {
-  // c2 = 0: σ ≈ λ tr ε I + 2 c1 ε.
+  // c2 = 0: σ ≈ λ tr ε I + 2 μ ε with μ = 2 c1.
   auto m = create_material("yeoh", KELVIN_YEOH_PLUGIN);
   const double q[] = {2e4, 0, 3e4};
   Mat3 eps;
@@ -52,7 +52,7 @@ TEST(Plugins, ExamplePluginWithoutStiffeningIsLinearElasticAtSmallStrain) {
   eps *= 1e-6;
   MaterialResponse r;
   ASSERT_TRUE(m->evaluate(point(Mat3::Identity() + eps, q), kStress, r));
-  const Mat3 linear = 3e4 * eps.trace() * Mat3::Identity() + 2 * 2e4 * eps;
+  const Mat3 linear = 3e4 * eps.trace() * Mat3::Identity() + 2 * (2 * 2e4) * eps;
   EXPECT_LT((r.P - linear).norm() / linear.norm(), 1e-5);
 }
 

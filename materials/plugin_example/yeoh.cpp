@@ -2,7 +2,7 @@
 /// Example kelvin material plugin: a compressible Yeoh-type solid,
 ///   Ψ = c1 (I₁ − 3) + c2 (I₁ − 3)² − 2 c1 ln J + λ/2 (ln J)²,   I₁ = tr FᵀF,
 ///   P = 2 (c1 + 2 c2 (I₁ − 3)) F + (λ ln J − 2 c1) F⁻ᵀ.
-/// At small strain it is linear elasticity with μ = c1 and Lamé λ; c2 stiffens large
+/// At small strain it is linear elasticity with shear modulus μ = 2 c1 and Lamé λ; c2 stiffens large
 /// stretches. Check it with `kelvin check-material build/libyeoh_plugin.so`.
 #include <Eigen/LU>
 #include <cmath>
@@ -18,7 +18,7 @@ class Yeoh final : public Material {
   std::string name() const override { return "yeoh"; }
   const std::vector<ParamInfo>& params() const override {
     static const std::vector<ParamInfo> p = {
-        {"c1", "Pa", "shear modulus at small strain", 1e4, 0, 1e300, true},
+        {"c1", "Pa", "half the small-strain shear modulus (mu = 2 c1)", 1e4, 0, 1e300, true},
         {"c2", "Pa", "stiffening with I1", 1e3, 0, 1e300, false},
         {"lambda", "Pa", "first Lamé parameter", 1e4, 0, 1e300, true},
     };
