@@ -36,7 +36,8 @@ std::vector<std::string> split(const std::string& line) {
   size_t start = 0;
   for (;;) {
     const size_t comma = line.find(',', start);
-    std::string cell = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    std::string cell =
+        line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
     const auto a = cell.find_first_not_of(" \t"), b = cell.find_last_not_of(" \t");
     cells.push_back(a == std::string::npos ? "" : cell.substr(a, b - a + 1));
     if (comma == std::string::npos) return cells;
@@ -47,15 +48,18 @@ std::vector<std::string> split(const std::string& line) {
 bool parse_number(const std::string& s, double& v) {
   if (s.empty()) return false;
   char* end = nullptr;
+  // Underflow yields a usable denormal or zero; overflow gives ±inf, which the callers
+  // refuse, so errno is not consulted.
   v = std::strtod(s.c_str(), &end);
-  return *end == '\0';
+  return end != s.c_str() && *end == '\0';
 }
 
-/// True when the row's cells after the first are all numbers (i.e. not a header).
-bool is_numeric_row(const std::vector<std::string>& cells, size_t from) {
+/// A header is recognised only when none of its value cells is a number, so that a
+/// first data row with one bad cell is reported instead of being skipped silently.
+bool is_header_row(const std::vector<std::string>& cells, size_t from) {
   double v;
   for (size_t k = from; k < cells.size(); ++k)
-    if (!parse_number(cells[k], v)) return false;
+    if (parse_number(cells[k], v)) return false;
   return true;
 }
 
@@ -72,11 +76,17 @@ MarkerRest read_marker_rest(const std::string& path) {
   MarkerRest out;
   std::vector<Eigen::Vector3d> pos;
   std::set<std::string> seen;
+  bool first = true;
   for (const auto& [n, line] : read_lines(path)) {
     const auto cells = split(line);
     if (cells.size() != 4)
-      throw Error(fmt::format("{}:{}: expected 4 columns name,x,y,z, found {}", path, n, cells.size()));
-    if (pos.empty() && out.names.empty() && !is_numeric_row(cells, 1)) continue;  // header
+      throw Error(
+          fmt::format("{}:{}: expected 4 columns name,x,y,z, found {}", path, n, cells.size()));
+    if (pos.empty() && first && is_header_row(cells, 1)) {
+      first = false;
+      continue;
+    }
+    first = false;
     if (cells[0].empty()) throw Error(fmt::format("{}:{}: empty marker name", path, n));
     if (!seen.insert(cells[0]).second)
       throw Error(fmt::format("{}:{}: marker '{}' appears twice", path, n, cells[0]));
@@ -96,16 +106,22 @@ MarkerTracks read_marker_tracks(const std::string& path) {
   const auto header = split(lines[0].second);
   const int hn = lines[0].first;
   if (header[0] != "t" || (header.size() - 1) % 3 != 0)
-    throw Error(fmt::format("{}:{}: header must be t followed by <name>_x,<name>_y,<name>_z triplets",
-                            path, hn));
+    throw Error(fmt::format(
+        "{}:{}: header must be t followed by <name>_x,<name>_y,<name>_z triplets", path, hn));
+  if (header.size() < 4)
+    throw Error(fmt::format("{}:{}: the header names no marker columns", path, hn));
   MarkerTracks out;
+  std::set<std::string> seen;
   for (size_t k = 1; k < header.size(); k += 3) {
     const std::string& h = header[k];
     const std::string name = h.size() > 2 ? h.substr(0, h.size() - 2) : "";
     if (name.empty() || h.substr(h.size() - 2) != "_x" || header[k + 1] != name + "_y" ||
         header[k + 2] != name + "_z")
-      throw Error(fmt::format("{}:{}: columns {}–{} must be {}_x,{}_y,{}_z", path, hn, k + 1, k + 3,
-                              name.empty() ? "<name>" : name, name, name));
+      throw Error(
+          fmt::format("{}:{}: columns {}-{} must be <name>_x,<name>_y,<name>_z in this order", path,
+                      hn, k + 1, k + 3));
+    if (!seen.insert(name).second)
+      throw Error(fmt::format("{}:{}: marker '{}' appears twice in the header", path, hn, name));
     out.names.push_back(name);
   }
   const int cols = static_cast<int>(header.size());
@@ -118,11 +134,12 @@ MarkerTracks read_marker_tracks(const std::string& path) {
     std::vector<double> row(cols);
     row[0] = number(path, n, cells[0], "time");
     if (!out.times.empty() && !(row[0] > out.times.back()))
-      throw Error(fmt::format("{}:{}: time {} does not increase (previous row: {})", path, n, row[0],
-                              out.times.back()));
+      throw Error(fmt::format("{}:{}: time {} does not increase (previous row: {})", path, n,
+                              row[0], out.times.back()));
     for (int k = 1; k < cols; ++k) {
       double v;
-      if (cells[k].empty()) v = std::numeric_limits<double>::quiet_NaN();  // occluded
+      if (cells[k].empty())
+        v = std::numeric_limits<double>::quiet_NaN();  // occluded
       else if (!parse_number(cells[k], v) || std::isinf(v))
         throw Error(fmt::format("{}:{}: column {} ({}) '{}' is not a number", path, n, k + 1,
                                 header[k], cells[k]));
@@ -140,12 +157,17 @@ MarkerTracks read_marker_tracks(const std::string& path) {
 
 ClampSamples read_clamp_csv(const std::string& path) {
   ClampSamples out;
+  bool first = true;
   for (const auto& [n, line] : read_lines(path)) {
     const auto cells = split(line);
     if (cells.size() != 8)
       throw Error(fmt::format("{}:{}: expected 8 columns t,tx,ty,tz,qw,qx,qy,qz, found {}", path, n,
                               cells.size()));
-    if (out.t.empty() && !is_numeric_row(cells, 0)) continue;  // header
+    if (first && is_header_row(cells, 0)) {
+      first = false;
+      continue;
+    }
+    first = false;
     double v[8];
     static const char* names[8] = {"t", "tx", "ty", "tz", "qw", "qx", "qy", "qz"};
     for (int k = 0; k < 8; ++k) v[k] = number(path, n, cells[k], names[k]);
@@ -153,8 +175,7 @@ ClampSamples read_clamp_csv(const std::string& path) {
       throw Error(fmt::format("{}:{}: time {} does not increase (previous row: {})", path, n, v[0],
                               out.t.back()));
     Eigen::Vector4d q(v[4], v[5], v[6], v[7]);
-    if (!(q.norm() > 1e-12))
-      throw Error(fmt::format("{}:{}: the quaternion is zero", path, n));
+    if (!(q.norm() > 1e-12)) throw Error(fmt::format("{}:{}: the quaternion is zero", path, n));
     q.normalize();
     // q and −q are the same rotation; keep neighbours on one side so that the
     // spline through the components does not swing through zero.

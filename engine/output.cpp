@@ -17,13 +17,16 @@ namespace kelvin {
 void write_file_atomic(const std::string& path, const std::string& contents) {
   const std::string tmp = path + ".tmp." + std::to_string(::getpid());
   {
+    errno = 0;
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw Error(fmt::format("{}: cannot write ({})", tmp, std::strerror(errno)));
+    if (!out)
+      throw Error(fmt::format("{}: cannot write ({}: {})", path, tmp, std::strerror(errno)));
     out.write(contents.data(), static_cast<std::streamsize>(contents.size()));
-    out.flush();
-    if (!out) {
+    out.close();
+    if (out.fail()) {
+      const int err = errno;
       std::remove(tmp.c_str());
-      throw Error(fmt::format("{}: write failed ({})", tmp, std::strerror(errno)));
+      throw Error(fmt::format("{}: write failed ({}: {})", path, tmp, std::strerror(err)));
     }
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
@@ -37,6 +40,9 @@ MarkerCsvWriter::MarkerCsvWriter(std::string path, std::vector<std::string> name
     : path_(std::move(path)), names_(std::move(names)) {}
 
 void MarkerCsvWriter::add_frame(double t, const Eigen::Matrix3Xd& positions) {
+  if (positions.cols() != static_cast<Eigen::Index>(names_.size()))
+    throw Error(fmt::format("{}: frame at t={} has {} marker positions, expected {}", path_, t,
+                            positions.cols(), names_.size()));
   times_.push_back(t);
   rows_.push_back(positions);
 }
@@ -57,7 +63,7 @@ void MarkerCsvWriter::flush() const {
 VtuSeries::VtuSeries(std::string directory, std::string basename, const Mesh& mesh)
     : dir_(std::move(directory)), base_(std::move(basename)), mesh_(mesh) {
   std::error_code ec;
-  std::filesystem::create_directories(dir_, ec);
+  if (!dir_.empty()) std::filesystem::create_directories(dir_, ec);
   if (ec) throw Error(fmt::format("{}: cannot create directory ({})", dir_, ec.message()));
 }
 
@@ -78,9 +84,18 @@ struct Appended {
 
 }  // namespace
 
-void VtuSeries::write_frame(double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                            const std::vector<std::pair<std::string, Eigen::VectorXd>>& cell_fields) {
+void VtuSeries::write_frame(
+    double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+    const std::vector<std::pair<std::string, Eigen::VectorXd>>& cell_fields) {
   const int nn = mesh_.num_nodes(), ne = mesh_.num_tets();
+  // The arrays are copied by byte count, so a size mismatch would read out of bounds.
+  if (x.cols() != nn || v.cols() != nn)
+    throw Error(fmt::format("{}/{}: frame at t={}: {} positions and {} velocities for {} nodes",
+                            dir_, base_, t, x.cols(), v.cols(), nn));
+  for (const auto& [name, field] : cell_fields)
+    if (field.size() != ne)
+      throw Error(fmt::format("{}/{}: cell field '{}' has {} values for {} tetrahedra", dir_, base_,
+                              name, field.size(), ne));
   Appended data;
   std::string xml;
   auto array = [&](const char* type, const std::string& name, int comps, size_t offset) {
@@ -95,9 +110,11 @@ void VtuSeries::write_frame(double t, const Eigen::Matrix3Xd& x, const Eigen::Ma
   array("Float64", "velocity", 3, data.add(v.data(), 3 * nn));
   xml += "      </PointData>\n      <CellData>\n";
   std::vector<std::int32_t> region(ne, 0);
-  for (int e = 0; e < ne && e < static_cast<int>(mesh_.region.size()); ++e) region[e] = mesh_.region[e];
+  for (int e = 0; e < ne && e < static_cast<int>(mesh_.region.size()); ++e)
+    region[e] = mesh_.region[e];
   array("Int32", "region", 1, data.add(region.data(), ne));
-  for (const auto& [name, field] : cell_fields) array("Float64", name, 1, data.add(field.data(), ne));
+  for (const auto& [name, field] : cell_fields)
+    array("Float64", name, 1, data.add(field.data(), ne));
   xml += "      </CellData>\n      <Points>\n";
   array("Float64", "points", 3, data.add(x.data(), 3 * nn));
   xml += "      </Points>\n      <Cells>\n";

@@ -1,17 +1,19 @@
 #include "engine/rigid_motion.hpp"
 
-#include <Eigen/Geometry>
-#include <Eigen/LU>
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 #include "engine/error.hpp"
 
 namespace kelvin {
 
-double RigidMotion::end_time() const { return std::numeric_limits<double>::infinity(); }
+double RigidMotion::end_time() const {
+  return std::numeric_limits<double>::infinity();
+}
 
 SinusoidMotion::SinusoidMotion(std::vector<Sinusoid> translation, std::vector<Sinusoid> rotation,
                                Eigen::Vector3d axis, Eigen::Vector3d center)
@@ -24,7 +26,7 @@ SinusoidMotion::SinusoidMotion(std::vector<Sinusoid> translation, std::vector<Si
 RigidPose SinusoidMotion::at(double t) const {
   RigidPose p;
   for (const auto& s : translation_) {
-    const double w = 2 * M_PI * s.frequency, a = w * t + s.phase;
+    const double w = 2 * std::numbers::pi * s.frequency, a = w * t + s.phase;
     p.d += s.amplitude * std::sin(a) * s.direction;
     p.ddot += s.amplitude * w * std::cos(a) * s.direction;
     p.dddot -= s.amplitude * w * w * std::sin(a) * s.direction;
@@ -32,7 +34,7 @@ RigidPose SinusoidMotion::at(double t) const {
   if (rotation_.empty()) return p;
   double th = 0, th1 = 0, th2 = 0;  // angle and its time derivatives
   for (const auto& s : rotation_) {
-    const double w = 2 * M_PI * s.frequency, a = w * t + s.phase;
+    const double w = 2 * std::numbers::pi * s.frequency, a = w * t + s.phase;
     th += s.amplitude * std::sin(a);
     th1 += s.amplitude * w * std::cos(a);
     th2 -= s.amplitude * w * w * std::sin(a);
@@ -102,7 +104,15 @@ SampledMotion::SampledMotion(std::vector<double> t, std::vector<Eigen::Vector3d>
     : t_(std::move(t)) {
   const int n = static_cast<int>(t_.size());
   if (n < 2 || static_cast<int>(d.size()) != n || static_cast<int>(q_wxyz.size()) != n)
-    throw Error("a sampled clamp motion needs at least 2 samples of time, translation and rotation");
+    throw Error(
+        "a sampled clamp motion needs at least 2 samples of time, translation and rotation");
+  for (int i = 1; i < n; ++i)
+    if (!(t_[i] > t_[i - 1]))
+      throw Error(
+          fmt::format("sampled clamp motion: time {} (sample {}) does not increase", t_[i], i));
+  for (int i = 0; i < n; ++i)
+    if (!(q_wxyz[i].norm() > 1e-12))
+      throw Error(fmt::format("sampled clamp motion: zero quaternion at sample {}", i));
   values_.resize(7, n);
   for (int i = 0; i < n; ++i) {
     values_.col(i).head<3>() = d[i];
@@ -116,8 +126,9 @@ RigidPose SampledMotion::at(double t) const {
   // validated to stay inside, this only keeps a stray evaluation well defined.
   const double tc = std::clamp(t, t_.front(), t_.back());
   const bool held = t != tc;
-  const int i = std::clamp(static_cast<int>(std::upper_bound(t_.begin(), t_.end(), tc) - t_.begin()) - 1,
-                           0, static_cast<int>(t_.size()) - 2);
+  const int i =
+      std::clamp(static_cast<int>(std::upper_bound(t_.begin(), t_.end(), tc) - t_.begin()) - 1, 0,
+                 static_cast<int>(t_.size()) - 2);
   const double h = t_[i + 1] - t_[i], a = (t_[i + 1] - tc) / h, b = (tc - t_[i]) / h;
   const Eigen::VectorXd y0 = values_.col(i), y1 = values_.col(i + 1);
   const Eigen::VectorXd m0 = second_.col(i), m1 = second_.col(i + 1);

@@ -3,11 +3,18 @@
 #include <map>
 
 #include "engine/error.hpp"
+#include "materials/corotational.hpp"
+#include "materials/fiber.hpp"
 #include "materials/material.hpp"
+#include "materials/mooney_rivlin.hpp"
 #include "materials/neo_hookean.hpp"
 #include "materials/plugin_loader.hpp"
 #include "materials/power_law.hpp"
 #include "materials/rayleigh.hpp"
+#include "materials/spline_material.hpp"
+#include "materials/stable_neo_hookean.hpp"
+#include "materials/strain_damping.hpp"
+#include "materials/stvk.hpp"
 
 namespace kelvin {
 namespace {
@@ -20,6 +27,13 @@ const std::map<std::string, Factory>& factories() {
       {"newtonian", [] { return std::make_unique<NewtonianViscosity>(); }},
       {"power-law", [] { return std::make_unique<PowerLawViscosity>(); }},
       {"rayleigh", [] { return std::make_unique<RayleighDamping>(); }},
+      {"stable-neo-hookean", [] { return std::make_unique<StableNeoHookean>(); }},
+      {"corotational", [] { return std::make_unique<Corotational>(); }},
+      {"stvk", [] { return std::make_unique<StVenantKirchhoff>(); }},
+      {"mooney-rivlin", [] { return std::make_unique<MooneyRivlin>(); }},
+      {"spline", [] { return std::make_unique<SplineMaterial>(); }},
+      {"fiber", [] { return std::make_unique<FiberReinforced>(); }},
+      {"strain-damping", [] { return std::make_unique<StrainDamping>(); }},
   };
   return f;
 }
