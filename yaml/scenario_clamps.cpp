@@ -24,18 +24,6 @@ std::string vec_str(const Eigen::Vector3d& v) {
   return fmt::format("[{:g}, {:g}, {:g}]", v[0], v[1], v[2]);
 }
 
-/// The file named by a scalar node, resolved and checked to exist.
-std::string existing_file(const Doc& d, const Node& n, const std::string& path) {
-  const std::string written = d.string(n, path);
-  const std::string file = d.resolve(written);
-  if (!std::filesystem::exists(file))
-    d.fail(n, path,
-           fmt::format("no such file '{}' (paths are relative to the scenario file: looked for "
-                       "{})",
-                       written, file));
-  return file;
-}
-
 NodeSelection load_selection(const Doc& d, const Node& n, const std::string& P, const Mesh& mesh) {
   d.check_keys(n, P, {"plane", "box", "nodes"});
   if (n.size() != 1) d.fail(n, P, "give exactly one of 'plane', 'box' or 'nodes'");
@@ -152,7 +140,7 @@ std::shared_ptr<RigidMotion> load_sinusoids(const Doc& d, const Node& n, const s
 
 std::shared_ptr<RigidMotion> load_motion_file(const Doc& d, const Node& f, const std::string& P,
                                               const TimeSpec& time) {
-  const std::string file = existing_file(d, f, P);
+  const std::string file = d.existing_file(f, P);
   std::shared_ptr<SampledMotion> motion;
   try {
     ClampSamples c = read_clamp_csv(file);
@@ -249,7 +237,7 @@ MarkersSpec load_markers(const Doc& d, const Node& n, const Mesh& mesh) {
     }
     if (names.empty()) d.fail(rest, RP, "the list is empty");
   } else {
-    const std::string file = existing_file(d, rest, RP);
+    const std::string file = d.existing_file(rest, RP);
     try {
       MarkerRest r = read_marker_rest(file);
       std::set<std::string> seen;
@@ -266,7 +254,7 @@ MarkersSpec load_markers(const Doc& d, const Node& n, const Mesh& mesh) {
   }
   if (const Node obs = n["observed"]) {
     const std::string OP = join(P, "observed");
-    spec.observed_path = existing_file(d, obs, OP);
+    spec.observed_path = d.existing_file(obs, OP);
     MarkerTracks tracks;
     try {
       tracks = read_marker_tracks(spec.observed_path);

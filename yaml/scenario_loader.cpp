@@ -4,15 +4,9 @@
 // material) are checked before the mesh is built, so that a typo costs nothing.
 #include <fmt/format.h>
 
-#include <algorithm>
-#include <cmath>
 #include <filesystem>
-#include <map>
-#include <set>
 
-#include "engine/csv.hpp"
 #include "engine/error.hpp"
-#include "materials/material.hpp"
 #include "yaml/scenario.hpp"
 #include "yaml/scenario_sections.hpp"
 #include "yaml/yaml_util.hpp"
@@ -22,7 +16,6 @@ namespace {
 
 using YAML::Node;
 using yamlutil::Doc;
-using yamlutil::join;
 
 TimeSpec load_time(const Doc& d, const Node& n) {
   const std::string P = "time";

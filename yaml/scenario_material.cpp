@@ -26,27 +26,14 @@ std::string names_list(const std::vector<std::string>& names) {
   return s;
 }
 
-/// The model's own admissible range; `origin` explains a value the user did not
-/// write directly (e.g. λ computed from E and ν).
-void check_param(const Doc& d, const Node& at, const std::string& path, const ParamInfo& p,
-                 double v, const std::string& model, const std::string& origin) {
-  if (p.positive && v <= 0)
-    d.fail(at, path,
-           fmt::format("must be positive for model '{}' (got {}{})", model, with_unit(v, p.unit),
-                       origin));
-  if (v < p.lower || v > p.upper) {
-    std::string range;
-    if (p.upper >= 1e300)
-      range = fmt::format("at least {}", with_unit(p.lower, p.unit));
-    else if (p.lower <= -1e300)
-      range = fmt::format("at most {}", with_unit(p.upper, p.unit));
-    else
-      range = fmt::format("within [{:g}, {:g}]{}", p.lower, p.upper,
-                          p.unit.empty() || p.unit == "1" ? "" : " " + p.unit);
-    d.fail(at, path,
-           fmt::format("must be {} for model '{}' (got {}{})", range, model, with_unit(v, p.unit),
-                       origin));
-  }
+/// What is wrong with value v of parameter p for the model, or "" when nothing.
+std::string param_problem(const ParamInfo& p, double v) {
+  if (p.positive && v <= 0) return "must be positive";
+  if (v >= p.lower && v <= p.upper) return "";
+  if (p.upper >= 1e300) return fmt::format("must be at least {}", with_unit(p.lower, p.unit));
+  if (p.lower <= -1e300) return fmt::format("must be at most {}", with_unit(p.upper, p.unit));
+  return fmt::format("must be within [{:g}, {:g}]{}", p.lower, p.upper,
+                     p.unit.empty() || p.unit == "1" ? "" : " " + p.unit);
 }
 
 MaterialTermSpec load_term(const Doc& d, const Node& n, const std::string& P, bool viscous) {
@@ -67,7 +54,7 @@ MaterialTermSpec load_term(const Doc& d, const Node& n, const std::string& P, bo
       if (hint.rfind("did you mean", 0) == 0) why += "; " + hint;
     }
     d.fail(model_node, join(P, "model"),
-           fmt::format("{}; built-in models: {}", why, names_list(names)));
+           fmt::format("{} (built-in models: {})", why, names_list(names)));
   }
   if (model->is_viscous() != viscous)
     d.fail(model_node, join(P, "model"),
@@ -98,7 +85,10 @@ MaterialTermSpec load_term(const Doc& d, const Node& n, const std::string& P, bo
       continue;
     }
     const double x = d.number(v, join(P, p.name));
-    check_param(d, v, join(P, p.name), p, x, spec.model, "");
+    const std::string problem = param_problem(p, x);
+    if (!problem.empty())
+      d.fail(v, join(P, p.name),
+             fmt::format("{} for model '{}' (got {})", problem, spec.model, with_unit(x, p.unit)));
     spec.params[p.name] = x;
   }
 
@@ -121,11 +111,16 @@ MaterialTermSpec load_term(const Doc& d, const Node& n, const std::string& P, bo
                          "be positive",
                          nu));
     const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu)), mu = E / (2 * (1 + nu));
-    const std::string origin = fmt::format(", from E = {:g} Pa and nu = {:g}", E, nu);
+    // A refused λ or μ is reported at the key the user wrote, with the formula.
     for (const auto& p : params) {
-      if (p.name == "lambda")
-        check_param(d, nu_node, join(P, "lambda"), p, lambda, spec.model, origin);
-      if (p.name == "mu") check_param(d, E_node, join(P, "mu"), p, mu, spec.model, origin);
+      const bool is_lambda = p.name == "lambda";
+      if (!is_lambda && p.name != "mu") continue;
+      const double v = is_lambda ? lambda : mu;
+      const std::string problem = param_problem(p, v);
+      if (!problem.empty())
+        d.fail(is_lambda ? nu_node : E_node, join(P, is_lambda ? "nu" : "E"),
+               fmt::format("E = {:g} Pa and nu = {:g} give {} = {:g} Pa, but model '{}' says {} {}",
+                           E, nu, p.name, v, spec.model, p.name, problem));
     }
     spec.params["lambda"] = lambda;
     spec.params["mu"] = mu;
@@ -253,18 +248,12 @@ Mesh load_mesh(const Doc& d, const Node& m) {
   }
   d.check_keys(m, "mesh", {"file"});
   const Node f = m["file"];
-  const std::string written = d.string(f, "mesh.file");
-  const std::string file = d.resolve(written);
+  const std::string file = d.existing_file(f, "mesh.file");
   const std::string ext = std::filesystem::path(file).extension().string();
   if (ext != ".msh" && ext != ".node" && ext != ".ele")
     d.fail(
         f, "mesh.file",
         fmt::format("unknown mesh format '{}'; expected .msh (Gmsh) or .node/.ele (TetGen)", ext));
-  if (!std::filesystem::exists(file))
-    d.fail(f, "mesh.file",
-           fmt::format("no such file '{}' (paths are relative to the scenario file: looked for "
-                       "{})",
-                       written, file));
   try {
     Mesh mesh = read_mesh(file);
     validate_mesh(mesh);

@@ -29,8 +29,9 @@ std::string suggestion(const std::string& word, const std::vector<std::string>& 
   std::string best;
   size_t best_d = 3;
   for (const auto& c : candidates) {
+    // Replacing every letter of a short name is no typo ('w' is not a slip for 'x').
     const size_t d = levenshtein(word, c);
-    if (d < best_d) best_d = d, best = c;
+    if (d < best_d && d < c.size()) best_d = d, best = c;
   }
   // A prefix ("elem" for "element_size") is as telling as a small typo.
   if (best.empty() && word.size() >= 2)
@@ -188,6 +189,18 @@ std::string Doc::resolve(const std::string& relative) const {
   std::filesystem::path p(relative);
   if (p.is_absolute() || dir_.empty()) return p.string();
   return (std::filesystem::path(dir_) / p).lexically_normal().string();
+}
+
+std::string Doc::existing_file(const YAML::Node& node, const std::string& path) const {
+  const std::string written = string(node, path);
+  const std::string file = resolve(written);
+  if (!std::filesystem::exists(file))
+    fail(node, path,
+         written == file ? fmt::format("no such file '{}'", written)
+                         : fmt::format("no such file '{}' (paths are relative to the scenario "
+                                       "file: looked for {})",
+                                       written, file));
+  return file;
 }
 
 }  // namespace kelvin::yamlutil

@@ -62,6 +62,8 @@ class Doc {
 
   /// A path written in the document, made relative to the document's directory.
   std::string resolve(const std::string& relative) const;
+  /// The file named by a scalar node, resolved and checked to exist.
+  std::string existing_file(const YAML::Node& node, const std::string& path) const;
 
  private:
   std::string file_;
