@@ -23,7 +23,7 @@ MaterialTerm make_term(const MaterialTermSpec& spec, int num_tets) {
   }
   Eigen::MatrixXd state;
   if (model->state_size() > 0) {
-    const std::vector<double> s = model->default_state();
+    const std::vector<double> s = spec.state.empty() ? model->default_state() : spec.state;
     state = Eigen::Map<const Eigen::VectorXd>(s.data(), s.size()).replicate(1, num_tets);
   }
   return {model, q.replicate(1, num_tets), state};
