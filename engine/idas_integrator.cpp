@@ -122,8 +122,12 @@ struct IdasIntegrator::Impl {
   }
 
   int jacobian(double t, double cj, const double* y) {
-    return guarded(t, stats.jacobian_seconds,
-                   [&] { return dae.jacobian(t, cj, y, SUNSparseMatrix_Data(J)); });
+    // IDAS zeroes the whole sparse matrix (structure included, SUNMatZero_Sparse)
+    // before every Jacobian call, so the fixed structure is written back each time.
+    return guarded(t, stats.jacobian_seconds, [&] {
+      dae.structure(SUNSparseMatrix_IndexPointers(J), SUNSparseMatrix_IndexValues(J));
+      return dae.jacobian(t, cj, y, SUNSparseMatrix_Data(J));
+    });
   }
 };
 
@@ -197,7 +201,6 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   check(IDASetUserData(m.mem, &m), "IDASetUserData");
   const sunindextype nnz = m.dae.nnz();
   m.J = SUNSparseMatrix(2 * n, 2 * n, nnz, CSC_MAT, m.ctx);
-  m.dae.structure(SUNSparseMatrix_IndexPointers(m.J), SUNSparseMatrix_IndexValues(m.J));
   m.LS = SUNLinSol_KLU(m.y, m.J, m.ctx);
   if (!m.LS) throw Error("SUNLinSol_KLU failed");
   {

@@ -1,11 +1,12 @@
 #include "engine/markers.hpp"
 
-#include <Eigen/Geometry>
-#include <Eigen/LU>
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "engine/error.hpp"
 
@@ -43,59 +44,112 @@ Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vecto
   return a + ab * (vb * denom) + ac * (vc * denom);
 }
 
+struct Box {
+  Eigen::Vector3d lo, hi;
+  /// Distance from p to the box (0 inside): a lower bound on the distance to the tet.
+  double distance(const Eigen::Vector3d& p) const {
+    return (lo - p).cwiseMax(p - hi).cwiseMax(0.0).norm();
+  }
+};
+
+std::vector<Box> tet_boxes(const Mesh& m) {
+  std::vector<Box> boxes(m.num_tets());
+  for (int e = 0; e < m.num_tets(); ++e) {
+    Box& b = boxes[e];
+    b.lo = b.hi = m.nodes.col(m.tets(0, e));
+    for (int k = 1; k < 4; ++k) {
+      b.lo = b.lo.cwiseMin(m.nodes.col(m.tets(k, e)));
+      b.hi = b.hi.cwiseMax(m.nodes.col(m.tets(k, e)));
+    }
+  }
+  return boxes;
+}
+
+/// The tet containing p, or -1. Tolerant by 1e-10 in the weights so that points on
+/// shared faces (and the mesh surface) count as inside.
+int containing_tet(const Mesh& m, const std::vector<Box>& boxes, const Eigen::Vector3d& p,
+                   Eigen::Vector4d& weights) {
+  for (int e = 0; e < m.num_tets(); ++e) {
+    const double slack = 1e-10 * (boxes[e].hi - boxes[e].lo).norm();
+    if (boxes[e].distance(p) > slack) continue;
+    const Eigen::Vector4d w = barycentric(m, e, p);
+    if (w.minCoeff() >= -1e-10) {
+      weights = w.cwiseMax(0.0) / w.cwiseMax(0.0).sum();
+      return e;
+    }
+  }
+  return -1;
+}
+
+/// Nearest point of the mesh to an outside point p: the nearest over all tets of
+/// the nearest point on their faces; boxes skip tets that cannot be closer.
+int nearest_tet(const Mesh& m, const std::vector<Box>& boxes, const Eigen::Vector3d& p,
+                Eigen::Vector3d& nearest, double& distance) {
+  int best = -1;
+  distance = std::numeric_limits<double>::infinity();
+  for (int e = 0; e < m.num_tets(); ++e) {
+    if (boxes[e].distance(p) >= distance) continue;
+    for (int skip = 0; skip < 4; ++skip) {
+      int f[3];
+      for (int k = 0, j = 0; k < 4; ++k)
+        if (k != skip) f[j++] = m.tets(k, e);
+      const Eigen::Vector3d q =
+          closest_on_triangle(p, m.nodes.col(f[0]), m.nodes.col(f[1]), m.nodes.col(f[2]));
+      const double d = (q - p).norm();
+      if (d < distance) {
+        distance = d;
+        best = e;
+        nearest = q;
+      }
+    }
+  }
+  return best;
+}
+
 }  // namespace
 
 std::vector<MarkerEmbedding> embed_markers(const Mesh& mesh, const std::vector<std::string>& names,
                                            const Eigen::Matrix3Xd& rest, double tolerance) {
+  if (static_cast<Eigen::Index>(names.size()) != rest.cols())
+    throw Error(fmt::format("embed_markers: {} marker names but {} rest positions", names.size(),
+                            rest.cols()));
+  if (mesh.num_tets() == 0) throw Error(mesh.source + ": cannot embed markers in an empty mesh");
+  const std::vector<Box> boxes = tet_boxes(mesh);
   std::vector<MarkerEmbedding> out;
-  const int ne = mesh.num_tets();
-  for (int i = 0; i < static_cast<int>(names.size()); ++i) {
+  for (size_t i = 0; i < names.size(); ++i) {
     const Eigen::Vector3d p = rest.col(i);
-    MarkerEmbedding best{names[i], -1, Eigen::Vector4d::Zero(), std::numeric_limits<double>::infinity()};
-    Eigen::Vector3d best_point = p;
-    for (int e = 0; e < ne && best.outside_distance > 0; ++e) {
-      const Eigen::Vector4d w = barycentric(mesh, e, p);
-      if (w.minCoeff() >= -1e-10) {
-        best.tet = e;
-        best.weights = w.cwiseMax(0.0) / w.cwiseMax(0.0).sum();
-        best.outside_distance = 0;
-        break;
-      }
-      // Outside this tet: its closest point is on one of its faces.
-      for (int skip = 0; skip < 4; ++skip) {
-        int f[3];
-        for (int k = 0, j = 0; k < 4; ++k)
-          if (k != skip) f[j++] = mesh.tets(k, e);
-        const Eigen::Vector3d q = closest_on_triangle(p, mesh.nodes.col(f[0]), mesh.nodes.col(f[1]),
-                                                      mesh.nodes.col(f[2]));
-        const double d = (q - p).norm();
-        if (d < best.outside_distance) {
-          best.outside_distance = d;
-          best.tet = e;
-          best_point = q;
-        }
-      }
-    }
-    if (best.outside_distance > 0) {
-      if (best.outside_distance > tolerance)
+    if (!p.allFinite())
+      throw Error(fmt::format("marker '{}' has a non-finite rest position", names[i]));
+    MarkerEmbedding mk;
+    mk.name = names[i];
+    mk.tet = containing_tet(mesh, boxes, p, mk.weights);
+    if (mk.tet < 0) {
+      Eigen::Vector3d q;
+      mk.tet = nearest_tet(mesh, boxes, p, q, mk.outside_distance);
+      if (mk.outside_distance > tolerance)
         throw Error(fmt::format(
             "marker '{}' at ({:.6g}, {:.6g}, {:.6g}) is {:.3g} mm outside the mesh (tolerance "
             "{:.3g} mm)",
-            names[i], p[0], p[1], p[2], 1e3 * best.outside_distance, 1e3 * tolerance));
-      const Eigen::Vector4d w = barycentric(mesh, best.tet, best_point).cwiseMax(0.0);
-      best.weights = w / w.sum();
+            names[i], p[0], p[1], p[2], 1e3 * mk.outside_distance, 1e3 * tolerance));
+      // q lies on a face of the tet, so its weights are in [0, 1] up to rounding.
+      const Eigen::Vector4d w = barycentric(mesh, mk.tet, q).cwiseMax(0.0);
+      mk.weights = w / w.sum();
     }
-    out.push_back(best);
+    out.push_back(mk);
   }
   return out;
 }
 
 Eigen::Matrix3Xd marker_positions(const Mesh& mesh, const std::vector<MarkerEmbedding>& markers,
                                   const Eigen::Matrix3Xd& x) {
+  if (x.cols() != mesh.num_nodes())
+    throw Error(fmt::format("marker_positions: {} nodal positions for a mesh of {} nodes", x.cols(),
+                            mesh.num_nodes()));
   Eigen::Matrix3Xd out(3, markers.size());
   for (size_t i = 0; i < markers.size(); ++i) {
     out.col(i).setZero();
-    for (int a = 0; a < 4; ++a) out.col(i) += markers[i].weights[a] * x.col(mesh.tets(a, markers[i].tet));
+    for (int a = 0; a < 4; ++a)
+      out.col(i) += markers[i].weights[a] * x.col(mesh.tets(a, markers[i].tet));
   }
   return out;
 }

@@ -20,7 +20,8 @@ int cells_along(double extent, double h) {
 }
 
 void check_size(double h, const char* what) {
-  if (!(h > 0) || !std::isfinite(h)) throw Error(fmt::format("{}: element size must be positive", what));
+  if (!(h > 0) || !std::isfinite(h))
+    throw Error(fmt::format("{}: element size must be positive", what));
 }
 
 }  // namespace
@@ -31,7 +32,8 @@ Mesh generate_box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double h
   Eigen::Array3i n;
   for (int i = 0; i < 3; ++i) n[i] = cells_along(hi[i] - lo[i], h);
   const long total_cells = static_cast<long>(n[0]) * n[1] * n[2];
-  if (total_cells > 20'000'000) throw Error("box: element size too small (more than 1.2e8 tetrahedra)");
+  if (total_cells > 20'000'000)
+    throw Error("box: element size too small (more than 1.2e8 tetrahedra)");
   Mesh m;
   m.source = fmt::format("generated box [{}, {}, {}]–[{}, {}, {}] h={}", lo[0], lo[1], lo[2], hi[0],
                          hi[1], hi[2], h);
@@ -70,7 +72,8 @@ Mesh generate_cylinder(double radius, double length, double h, int axis) {
   if (axis < 0 || axis > 2) throw Error("cylinder: axis must be 0, 1 or 2");
   // Disk: concentric rings k = 1..nr of 6k nodes around a centre node, stitched
   // ring to ring by angle (near-equilateral triangles); then prisms over nz layers.
-  const int nr = cells_along(radius, h), nz = cells_along(length, h);
+  // At least two rings: a single hexagon loses 17% of the disk area.
+  const int nr = std::max(2, cells_along(radius, h)), nz = cells_along(length, h);
   if (6.0 * nr * nr * nz > 1e8) throw Error("cylinder: element size too small");
   std::vector<Eigen::Vector2d> disk{{0, 0}};
   std::vector<int> ring_start{0, 1};
@@ -107,8 +110,9 @@ Mesh generate_cylinder(double radius, double length, double h, int axis) {
     for (int d = 0; d < nd; ++d) {
       const Eigen::Vector3d p(disk[d].x(), disk[d].y(), length * l / nz);
       // Cyclic permutation keeps the orientation: the cylinder axis becomes `axis`.
-      m.nodes.col(l * nd + d) = axis == 2 ? p : axis == 0 ? Eigen::Vector3d(p.z(), p.x(), p.y())
-                                                          : Eigen::Vector3d(p.y(), p.z(), p.x());
+      m.nodes.col(l * nd + d) = axis == 2   ? p
+                                : axis == 0 ? Eigen::Vector3d(p.z(), p.x(), p.y())
+                                            : Eigen::Vector3d(p.y(), p.z(), p.x());
     }
   // Prism (v0 < v1 < v2 below, primes above) → 3 tets whose quad-face diagonals all
   // start at the face's lowest-numbered node, so neighbouring prisms agree.

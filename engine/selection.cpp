@@ -1,15 +1,22 @@
 #include "engine/selection.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
+
+#include "engine/error.hpp"
 
 namespace kelvin {
 
 std::vector<int> select_nodes(const Mesh& mesh, const NodeSelection& sel) {
   std::vector<int> out;
   const int nn = mesh.num_nodes();
+  if (nn == 0 && sel.kind != NodeSelection::Kind::Ids) return out;
   switch (sel.kind) {
     case NodeSelection::Kind::Plane: {
+      if (sel.axis < 0 || sel.axis > 2)
+        throw Error(fmt::format("plane selection: axis {} is not 0 (x), 1 (y) or 2 (z)", sel.axis));
       double tol = sel.tolerance;
       if (tol < 0) {
         const Eigen::Vector3d span =
@@ -27,8 +34,12 @@ std::vector<int> select_nodes(const Mesh& mesh, const NodeSelection& sel) {
           out.push_back(a);
       break;
     case NodeSelection::Kind::Ids:
-      for (int id : sel.ids)
-        if (id >= 0 && id < nn) out.push_back(id);
+      for (int id : sel.ids) {
+        if (id < 0 || id >= nn)
+          throw Error(fmt::format("{}: node id {} is out of range (the mesh has nodes 0..{})",
+                                  mesh.source, id, nn - 1));
+        out.push_back(id);
+      }
       std::sort(out.begin(), out.end());
       out.erase(std::unique(out.begin(), out.end()), out.end());
       break;
