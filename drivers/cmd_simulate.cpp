@@ -56,6 +56,7 @@ void register_simulate(CLI::App& app, int& exit_code) {
     try {
       const SimulationResult r = run_simulation(scenario, options);
       fmt::print("{}\n", r.summary());
+      std::fflush(stdout);
       if (!r.completed) {
         if (!r.error.empty()) fmt::print(stderr, "error: {}\n", r.error);
         fmt::print(stderr, "outputs up to t = {:.6g} s are in {}\n", r.t_reached, outdir);
