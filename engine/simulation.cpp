@@ -78,7 +78,12 @@ std::string SimulationResult::summary() const {
   std::string orders;
   for (int q = 1; q <= 5; ++q)
     if (stats.order_histogram[q]) orders += fmt::format(" {}:{}", q, stats.order_histogram[q]);
-  return fmt::format(
+  const std::string statics =
+      static_result.load_steps > 0
+          ? fmt::format("static initial state: {} Newton iterations in {} load steps; ",
+                        static_result.iterations, static_result.load_steps)
+          : "";
+  return statics + fmt::format(
       "{} t = {:.6g} s in {:.3g} s wall: {} steps (mean order {:.2f};{}), {} residuals, "
       "{} Jacobians, {} factorizations, {} linear solves, {} error-test and {} convergence "
       "failures; {} marker frames, {} VTU frames",

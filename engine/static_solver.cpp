@@ -14,13 +14,17 @@ struct Residual {
   Eigen::Matrix3Xd x, v;
   AssemblyOutput out;
 
-  /// r(x) − s f_ext; false when an element is inadmissible at x.
-  bool eval(const Eigen::VectorXd& xf, double s, bool tangent, Eigen::VectorXd& g) {
+  /// r(x) − s f_ext, and the potential energy W(x) − s f_ext·x when `energy`;
+  /// false when an element is inadmissible at x.
+  bool eval(const Eigen::VectorXd& xf, double s, bool tangent, Eigen::VectorXd& g,
+            double* energy = nullptr) {
     model.expand(t, xf.data(), nullptr, x, v);
     AssemblyRequest req;
     req.stiffness = tangent;
+    req.energy = energy != nullptr;
     if (!model.assemble(x, v, req, out)) return false;
     g = out.force - s * model.gravity_force();
+    if (energy) *energy = out.energy - s * model.gravity_force().dot(xf);
     return true;
   }
 };
@@ -48,6 +52,12 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
   }
   // Forces are compared to the load, or to the initial imbalance when there is no load.
   const double scale = std::max({model.gravity_force().norm(), g.norm(), 1e-300});
+  // Newton corrections below this length (1e-12 of the body's size) are round-off.
+  const Eigen::Matrix3Xd& X = model.mesh().nodes;
+  const double negligible = 1e-12 * (X.rowwise().maxCoeff() - X.rowwise().minCoeff()).norm();
+  bool hyperelastic = true;  // every term has an energy (viscous terms vanish at rest)
+  for (const auto& term : model.terms())
+    hyperelastic &= term.model->is_viscous() || term.model->has_energy();
   Eigen::KLU<Eigen::SparseMatrix<double>> klu;
   bool analysed = false;
 
@@ -74,18 +84,30 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
       klu.factorize(K);
       if (klu.info() != Eigen::Success) break;
       const Eigen::VectorXd dx = klu.solve(-g);
-      // Backtracking on the residual norm; inadmissible trial states count as worse.
-      double alpha = 1;
-      const double g0 = g.norm();
+      if (dx.lpNorm<Eigen::Infinity>() <= negligible) {
+        ok = true;
+        break;
+      }
+      // Backtracking: on the potential energy (Armijo) when the model has one and dx
+      // descends — a residual-norm search stalls on large rotations, where the
+      // linearised step stretches fibres; otherwise on the residual norm.
+      // Inadmissible trial states count as worse.
+      double alpha = 1, pi0 = 0, pi_trial = 0;
+      const double g0 = g.norm(), slope = g.dot(dx);
+      const bool by_energy = hyperelastic && slope < 0 && R.eval(x, target, false, g_trial, &pi0);
       bool accepted = false;
       for (int ls = 0; ls < 30 && !accepted; ++ls, alpha *= 0.5) {
         x_trial = x + alpha * dx;
-        accepted = R.eval(x_trial, target, false, g_trial) &&
-                   g_trial.norm() <= (1 - 1e-4 * alpha) * g0;
+        if (by_energy)
+          accepted = R.eval(x_trial, target, false, g_trial, &pi_trial) &&
+                     pi_trial <= pi0 + 1e-4 * alpha * slope;
+        else
+          accepted = R.eval(x_trial, target, false, g_trial) &&
+                     g_trial.norm() <= (1 - 1e-4 * alpha) * g0;
       }
       if (!accepted) {
-        // Newton may stall at round-off level: accept when the step is negligible.
-        if (dx.norm() <= 1e-13 * std::max(1.0, x.norm())) ok = true;
+        // At round-off level the residual norm cannot decrease any more.
+        if (res.residual <= 1e3 * opt.tolerance) ok = true;
         break;
       }
       x = x_trial;
