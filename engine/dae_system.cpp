@@ -18,13 +18,17 @@ bool DaeSystem::residual(double t, const double* y, const double* yp, double* r)
   return true;
 }
 
-bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {
+bool DaeSystem::stiffness_and_damping(double t, const double* y) {
   model_.expand(t, y, y + n_, x_, v_);
   AssemblyRequest req;
   req.force = false;
   req.stiffness = true;
   req.damping = true;
-  if (!model_.assemble(x_, v_, req, out_)) return false;
+  return model_.assemble(x_, v_, req, out_);
+}
+
+bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {
+  if (!stiffness_and_damping(t, y)) return false;
   const SparsePattern& P = model_.pattern();
   const std::vector<double>& M = model_.mass();
   long k = 0;

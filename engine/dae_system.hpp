@@ -27,6 +27,9 @@ class DaeSystem {
   bool residual(double t, const double* y, const double* yp, double* r);
   /// J values in structure() order.
   bool jacobian(double t, double cj, const double* y, double* values);
+  /// Assembles K and D at y (into last_assembly()); the blocks of the Newton matrix
+  /// that SchurSolver combines.
+  bool stiffness_and_damping(double t, const double* y);
   /// y' consistent with y at t: x' = v and v' = M⁻¹(f_ext − r(x, v) − M_fc a_c).
   bool consistent_derivative(double t, const double* y, double* yp);
 

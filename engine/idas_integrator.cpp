@@ -3,14 +3,12 @@
 #include <fmt/format.h>
 #include <idas/idas.h>
 #include <nvector/nvector_serial.h>
-#include <sunlinsol/sunlinsol_klu.h>
 #include <sunmatrix/sunmatrix_sparse.h>
 
 #include <chrono>
-#include <mutex>
-#include <unordered_map>
 
 #include "engine/dae_system.hpp"
+#include "engine/schur_solver.hpp"
 #include "engine/error.hpp"
 
 namespace kelvin {
@@ -19,40 +17,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-/// The KLU solver's setup/solve, wrapped so that their share of the run time can
-/// be reported. SUNDIALS ops tables are per instance; the originals are kept here.
-struct TimedOps {
-  int (*setup)(SUNLinearSolver, SUNMatrix);
-  int (*solve)(SUNLinearSolver, SUNMatrix, N_Vector, N_Vector, realtype);
-  double* setup_seconds;
-  double* solve_seconds;
-  long* solves;
-};
-std::mutex timed_mutex;
-std::unordered_map<SUNLinearSolver, TimedOps>& timed_ops() {
-  static std::unordered_map<SUNLinearSolver, TimedOps> m;
-  return m;
-}
-TimedOps lookup(SUNLinearSolver S) {
-  std::lock_guard<std::mutex> lock(timed_mutex);
-  return timed_ops().at(S);
-}
-int timed_setup(SUNLinearSolver S, SUNMatrix A) {
-  const TimedOps ops = lookup(S);
-  const auto start = Clock::now();
-  const int flag = ops.setup(S, A);
-  *ops.setup_seconds += seconds_since(start);
-  return flag;
-}
-int timed_solve(SUNLinearSolver S, SUNMatrix A, N_Vector x, N_Vector b, realtype tol) {
-  const TimedOps ops = lookup(S);
-  const auto start = Clock::now();
-  const int flag = ops.solve(S, A, x, b, tol);
-  *ops.solve_seconds += seconds_since(start);
-  ++*ops.solves;
-  return flag;
 }
 
 }  // namespace
@@ -69,6 +33,7 @@ struct IdasIntegrator::Impl {
   double t_solver = 0;  // internal time of IDAS
 
   DaeSystem dae;
+  SchurSolver schur{dae};
 
   // diagnostics
   IntegratorStats stats;
@@ -82,11 +47,7 @@ struct IdasIntegrator::Impl {
 
   ~Impl() {
     if (mem) IDAFree(&mem);
-    if (LS) {
-      std::lock_guard<std::mutex> lock(timed_mutex);
-      timed_ops().erase(LS);
-      SUNLinSolFree(LS);
-    }
+    if (LS) SUNLinSolFreeEmpty(LS);
     if (J) SUNMatDestroy(J);
     for (N_Vector v : {y, yp, yout, atol})
       if (v) N_VDestroy(v);
@@ -122,12 +83,7 @@ struct IdasIntegrator::Impl {
   }
 
   int jacobian(double t, double cj, const double* y) {
-    // IDAS zeroes the whole sparse matrix (structure included, SUNMatZero_Sparse)
-    // before every Jacobian call, so the fixed structure is written back each time.
-    return guarded(t, stats.jacobian_seconds, [&] {
-      dae.structure(SUNSparseMatrix_IndexPointers(J), SUNSparseMatrix_IndexValues(J));
-      return dae.jacobian(t, cj, y, SUNSparseMatrix_Data(J));
-    });
+    return guarded(t, stats.jacobian_seconds, [&] { return schur.assemble(t, cj, y); });
   }
 };
 
@@ -147,6 +103,42 @@ int jacobian_fn(realtype t, realtype cj, N_Vector y, N_Vector, N_Vector, SUNMatr
 void error_handler(int, const char* module, const char* function, char* msg, void* data) {
   auto* impl = static_cast<IdasIntegrator::Impl*>(data);
   impl->last_idas_message = fmt::format("{} {}: {}", module, function, msg);
+}
+
+/// SUNLinearSolver adapter for SchurSolver: setup factorises the matrix the
+/// Jacobian callback assembled, solve applies it; both are timed for the summary.
+IdasIntegrator::Impl* impl_of(SUNLinearSolver S) { return static_cast<IdasIntegrator::Impl*>(S->content); }
+SUNLinearSolver_Type schur_type(SUNLinearSolver) { return SUNLINEARSOLVER_DIRECT; }
+SUNLinearSolver_ID schur_id(SUNLinearSolver) { return SUNLINEARSOLVER_CUSTOM; }
+int schur_setup(SUNLinearSolver S, SUNMatrix) {
+  auto* m = impl_of(S);
+  const auto start = Clock::now();
+  const bool ok = m->schur.factorize();
+  m->stats.setup_seconds += seconds_since(start);
+  return ok ? 0 : SUNLS_PACKAGE_FAIL_REC;  // singular: IDAS retries with a smaller step
+}
+int schur_solve(SUNLinearSolver S, SUNMatrix, N_Vector x, N_Vector b, realtype) {
+  auto* m = impl_of(S);
+  const auto start = Clock::now();
+  m->schur.solve(N_VGetArrayPointer(b), N_VGetArrayPointer(x));
+  m->stats.solve_seconds += seconds_since(start);
+  ++m->stats.linear_solves;
+  return 0;
+}
+int schur_free(SUNLinearSolver S) {
+  SUNLinSolFreeEmpty(S);
+  return 0;
+}
+SUNLinearSolver make_schur_linear_solver(SUNContext ctx, IdasIntegrator::Impl* impl) {
+  SUNLinearSolver S = SUNLinSolNewEmpty(ctx);
+  if (!S) return nullptr;
+  S->content = impl;
+  S->ops->gettype = schur_type;
+  S->ops->getid = schur_id;
+  S->ops->setup = schur_setup;
+  S->ops->solve = schur_solve;
+  S->ops->free = schur_free;
+  return S;
 }
 
 void check(int flag, const char* call) {
@@ -199,20 +191,10 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   }
   check(IDASVtolerances(m.mem, m.opt.rtol, m.atol), "IDASVtolerances");
   check(IDASetUserData(m.mem, &m), "IDASetUserData");
-  const sunindextype nnz = m.dae.nnz();
-  m.J = SUNSparseMatrix(2 * n, 2 * n, nnz, CSC_MAT, m.ctx);
-  m.LS = SUNLinSol_KLU(m.y, m.J, m.ctx);
-  if (!m.LS) throw Error("SUNLinSol_KLU failed");
-  // AMD on A + Aᵀ suits the symmetric-pattern FEM blocks far better than the
-  // COLAMD default (bench_forward, 8k-tet foam cylinder: 86 s → 55 s for 1 s).
-  check(SUNLinSol_KLUSetOrdering(m.LS, 0), "SUNLinSol_KLUSetOrdering");
-  {
-    std::lock_guard<std::mutex> lock(timed_mutex);
-    timed_ops()[m.LS] = {m.LS->ops->setup, m.LS->ops->solve, &m.stats.setup_seconds,
-                         &m.stats.solve_seconds, &m.stats.linear_solves};
-  }
-  m.LS->ops->setup = timed_setup;
-  m.LS->ops->solve = timed_solve;
+  // The Newton matrix lives in SchurSolver; IDAS only needs a placeholder matrix.
+  m.J = SUNSparseMatrix(2 * n, 2 * n, 1, CSC_MAT, m.ctx);
+  m.LS = make_schur_linear_solver(m.ctx, &m);
+  if (!m.J || !m.LS) throw Error("could not create the IDAS linear solver");
   check(IDASetLinearSolver(m.mem, m.LS, m.J), "IDASetLinearSolver");
   check(IDASetJacFn(m.mem, jacobian_fn), "IDASetJacFn");
   check(IDASetMaxOrd(m.mem, m.opt.max_order), "IDASetMaxOrd");

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "engine/dae_system.hpp"
+#include "engine/schur_solver.hpp"
 #include "engine/fem_model.hpp"
 #include "engine/mesh.hpp"
 #include "engine/selection.hpp"
@@ -104,6 +105,15 @@ TEST_P(JacobianTest, NewtonMatrixMatchesFiniteDifferencesOfTheResidual) {
     }
     EXPECT_LT(best, 1e-6) << "trial " << trial;
   }
+
+  // The Schur-complement solver IDAS uses solves exactly this matrix.
+  SchurSolver schur(dae);
+  ASSERT_TRUE(schur.assemble(t, cj, y.data()));
+  ASSERT_TRUE(schur.factorize());
+  const Eigen::VectorXd b = random(N, 1.0);
+  Eigen::VectorXd x(N);
+  schur.solve(b.data(), x.data());
+  EXPECT_LT((J * x - b).norm() / b.norm(), 1e-10);
 }
 
 INSTANTIATE_TEST_SUITE_P(LumpedAndConsistentMass, JacobianTest, ::testing::Values(true, false));
