@@ -36,7 +36,8 @@ Scenario remeshed(const Scenario& base, double h) {
     const auto& m = base.markers.embedded[i];
     names.push_back(m.name);
     rest.col(i).setZero();
-    for (int a = 0; a < 4; ++a) rest.col(i) += m.weights[a] * base.mesh.nodes.col(base.mesh.tets(a, m.tet));
+    for (int a = 0; a < 4; ++a)
+      rest.col(i) += m.weights[a] * base.mesh.nodes.col(base.mesh.tets(a, m.tet));
   }
   s.markers.embedded = embed_markers(s.mesh, names, rest, 1e-3);
   s.time.end = 1.0;
@@ -50,7 +51,8 @@ int main(int argc, char** argv) {
   int repeat = 3;
   std::vector<double> sizes = {0.0072, 0.0036, 0.0023};
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc) repeat = std::atoi(argv[++i]);
+    if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc)
+      repeat = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--sizes") && i + 1 < argc) {
       sizes.clear();
       for (char* tok = std::strtok(argv[++i], ","); tok; tok = std::strtok(nullptr, ","))
@@ -58,12 +60,13 @@ int main(int argc, char** argv) {
     }
   }
   const Scenario base = load_scenario(KELVIN_SOURCE_DIR "/yaml/examples/foam-cylinder.yaml");
-  const std::string outdir = (std::filesystem::temp_directory_path() / "kelvin-bench-forward").string();
+  const std::string outdir =
+      (std::filesystem::temp_directory_path() / "kelvin-bench-forward").string();
   fmt::print("foam cylinder, {} s simulated, rtol {:g}, median of {} runs\n", 1.0, base.solver.rtol,
              repeat);
-  fmt::print("{:>8} {:>7} {:>7} {:>9} {:>7} {:>10} {:>6} {:>8} {:>8} {:>8} {:>8}\n", "h [mm]", "tets",
-             "dofs", "wall [s]", "steps", "ms/step", "order", "jac %", "factor %", "solve %",
-             "resid %");
+  fmt::print("{:>8} {:>7} {:>7} {:>9} {:>7} {:>10} {:>6} {:>8} {:>8} {:>8} {:>8}\n", "h [mm]",
+             "tets", "dofs", "wall [s]", "steps", "ms/step", "order", "jac %", "factor %",
+             "solve %", "resid %");
   for (double h : sizes) {
     const Scenario s = remeshed(base, h);
     std::vector<double> wall, jac, setup, solve, resid;
@@ -84,10 +87,11 @@ int main(int argc, char** argv) {
     }
     int clamped_nodes = 0;
     for (const auto& c : s.clamps) clamped_nodes += static_cast<int>(c.nodes.size());
-    fmt::print("{:8.2f} {:7d} {:7d} {:9.3f} {:7d} {:10.3f} {:6.2f} {:8.1f} {:8.1f} {:8.1f} {:8.1f}\n",
-               1e3 * h, s.mesh.num_tets(), 3 * (s.mesh.num_nodes() - clamped_nodes), median(wall),
-               last.stats.steps, 1e3 * median(wall) / last.stats.steps, last.stats.mean_order(),
-               100 * median(jac), 100 * median(setup), 100 * median(solve), 100 * median(resid));
+    fmt::print(
+        "{:8.2f} {:7d} {:7d} {:9.3f} {:7d} {:10.3f} {:6.2f} {:8.1f} {:8.1f} {:8.1f} {:8.1f}\n",
+        1e3 * h, s.mesh.num_tets(), 3 * (s.mesh.num_nodes() - clamped_nodes), median(wall),
+        last.stats.steps, 1e3 * median(wall) / last.stats.steps, last.stats.mean_order(),
+        100 * median(jac), 100 * median(setup), 100 * median(solve), 100 * median(resid));
   }
   std::filesystem::remove_all(outdir);
   return 0;

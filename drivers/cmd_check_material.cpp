@@ -13,7 +13,9 @@ namespace kelvin {
 namespace {
 
 std::string range_text(const ParamInfo& p) {
-  auto num = [](double v) { return std::abs(v) >= 1e299 ? std::string(v < 0 ? "-inf" : "inf") : fmt::format("{:g}", v); };
+  auto num = [](double v) {
+    return std::abs(v) >= 1e299 ? std::string(v < 0 ? "-inf" : "inf") : fmt::format("{:g}", v);
+  };
   return fmt::format("{}{}, {}]", p.positive ? "(" : "[", num(p.lower), num(p.upper));
 }
 
@@ -22,14 +24,14 @@ void print_model(const Material& m) {
              m.has_energy() ? ", hyperelastic" : "",
              m.state_size() ? fmt::format(", {} state values per element", m.state_size()) : "");
   for (const auto& p : m.params())
-    fmt::print("    {:<10} {:>10g} {:<8} {:<16} {}\n", p.name, p.default_value, p.unit, range_text(p),
-               p.description);
+    fmt::print("    {:<10} {:>10g} {:<8} {:<16} {}\n", p.name, p.default_value, p.unit,
+               range_text(p), p.description);
 }
 
 int run_check(const std::string& target, const std::string& model_name,
               const std::vector<std::string>& sets, double tolerance, std::uint64_t seed) {
-  const bool is_plugin = target.find('/') != std::string::npos ||
-                         std::filesystem::path(target).extension() == ".so";
+  const bool is_plugin =
+      target.find('/') != std::string::npos || std::filesystem::path(target).extension() == ".so";
   std::unique_ptr<Material> m =
       is_plugin ? load_plugin_material(target, model_name) : create_material(target, "");
   std::vector<double> q;

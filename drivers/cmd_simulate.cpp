@@ -34,18 +34,17 @@ void register_simulate(CLI::App& app, int& exit_code) {
         scenario.time.end = args->end;
         for (const auto& c : scenario.clamps)
           if (c.motion->end_time() < args->end)
-            throw Error(fmt::format("--end {}: the motion of clamp '{}' ends at t = {} s", args->end,
-                                    c.name, c.motion->end_time()));
+            throw Error(fmt::format("--end {}: the motion of clamp '{}' ends at t = {} s",
+                                    args->end, c.name, c.motion->end_time()));
       }
     } catch (const Error& e) {
       fmt::print(stderr, "error: {}\n", e.what());
       exit_code = kExitInputError;
       return;
     }
-    const std::string outdir =
-        args->outdir.empty()
-            ? std::filesystem::path(args->scenario).stem().string() + "-out"
-            : args->outdir;
+    const std::string outdir = args->outdir.empty()
+                                   ? std::filesystem::path(args->scenario).stem().string() + "-out"
+                                   : args->outdir;
     if (!args->quiet)
       fmt::print("kelvin simulate: {} ({} nodes, {} tetrahedra) → {}\n", scenario.name,
                  scenario.mesh.num_nodes(), scenario.mesh.num_tets(), outdir);

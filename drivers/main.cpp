@@ -8,7 +8,9 @@ std::atomic<bool> g_interrupted{false};
 }
 
 namespace {
-void on_signal(int) { kelvin::g_interrupted = true; }
+void on_signal(int) {
+  kelvin::g_interrupted = true;
+}
 }  // namespace
 
 int main(int argc, char** argv) {

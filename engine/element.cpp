@@ -1,7 +1,8 @@
 #include "engine/element.hpp"
 
-#include <Eigen/LU>
 #include <fmt/format.h>
+
+#include <Eigen/LU>
 
 #include "engine/error.hpp"
 
@@ -38,8 +39,8 @@ void accumulate_element_matrix(const TetElement& el, const Mat9& A, double scale
   const double s = scale * el.volume;
   for (int a = 0; a < 4; ++a)
     for (int i = 0; i < 3; ++i)
-      out.row(3 * a + i) += s * (el.G(0, a) * T.row(i) + el.G(1, a) * T.row(i + 3) +
-                                 el.G(2, a) * T.row(i + 6));
+      out.row(3 * a + i) +=
+          s * (el.G(0, a) * T.row(i) + el.G(1, a) * T.row(i + 3) + el.G(2, a) * T.row(i + 6));
 }
 
 }  // namespace kelvin

@@ -13,8 +13,8 @@ namespace kelvin {
 
 struct TetElement {
   int nodes[4];
-  double volume;                   // rest volume
-  Eigen::Matrix<double, 3, 4> G;   // columns: ∇N_a in the rest configuration
+  double volume;                  // rest volume
+  Eigen::Matrix<double, 3, 4> G;  // columns: ∇N_a in the rest configuration
 };
 
 /// Precomputes rest volume and shape gradients; throws kelvin::Error naming the

@@ -1,8 +1,8 @@
 #include "engine/fem_model.hpp"
 
-#include <Eigen/LU>
 #include <fmt/format.h>
 
+#include <Eigen/LU>
 #include <algorithm>
 
 #include "engine/error.hpp"
@@ -32,13 +32,13 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
   if (density_.size() != ne) throw Error("density field size does not match the mesh");
   for (const auto& term : terms_)
     if (term.q.cols() != ne || term.q.rows() != static_cast<int>(term.model->params().size()))
-      throw Error(fmt::format("parameter field of material '{}' has the wrong shape",
-                              term.model->name()));
+      throw Error(
+          fmt::format("parameter field of material '{}' has the wrong shape", term.model->name()));
   for (const auto& term : terms_)
     if (term.model->state_size() > 0 &&
         (term.state.rows() != term.model->state_size() || term.state.cols() != ne))
-      throw Error(fmt::format("state field of material '{}' has the wrong shape",
-                              term.model->name()));
+      throw Error(
+          fmt::format("state field of material '{}' has the wrong shape", term.model->name()));
   elements_.reserve(ne);
   for (int e = 0; e < ne; ++e) elements_.push_back(make_tet_element(mesh, e));
 
@@ -60,8 +60,9 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
 }
 
 void FemModel::update_rest_tangents() {
-  const bool needed = std::any_of(terms_.begin(), terms_.end(),
-                                  [](const MaterialTerm& t) { return t.model->needs_rest_tangent(); });
+  const bool needed = std::any_of(terms_.begin(), terms_.end(), [](const MaterialTerm& t) {
+    return t.model->needs_rest_tangent();
+  });
   if (!needed) return;
   const int ne = mesh_.num_tets();
   rest_tangent_.assign(ne, Mat9::Zero());
@@ -248,8 +249,10 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
     for (const auto& term : terms_) {
       const bool viscous = term.model->is_viscous();
       unsigned r = request;
-      if (viscous) r &= ~static_cast<unsigned>(kEnergy);
-      else if (req.energy) r |= kEnergy;
+      if (viscous)
+        r &= ~static_cast<unsigned>(kEnergy);
+      else if (req.energy)
+        r |= kEnergy;
       if (!viscous) r &= ~static_cast<unsigned>(kRateTangent);
       mp.q = term.q.col(e).data();
       mp.state = term.state.size() ? term.state.col(e).data() : nullptr;
@@ -301,7 +304,8 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
 }
 
 double FemModel::kinetic_energy(const Eigen::Matrix3Xd& v) const {
-  if (lumped_) return 0.5 * (v.colwise().squaredNorm().transpose().array() * node_mass_.array()).sum();
+  if (lumped_)
+    return 0.5 * (v.colwise().squaredNorm().transpose().array() * node_mass_.array()).sum();
   double ke = 0;
   for (int e = 0; e < mesh_.num_tets(); ++e) {
     const auto& el = elements_[e];

@@ -54,12 +54,12 @@ struct AssemblyRequest {
 };
 
 struct AssemblyOutput {
-  Eigen::VectorXd force;       // r over free dofs
-  std::vector<double> K, D;    // values in pattern() order
-  Eigen::VectorXd cell_energy; // Ψ per tet (energy density, J/m³)
-  double energy = 0;           // Σ V Ψ
-  int failed_element = -1;     // set when a material reported an inadmissible state
-  double failed_det = 0;       // det F of that element
+  Eigen::VectorXd force;        // r over free dofs
+  std::vector<double> K, D;     // values in pattern() order
+  Eigen::VectorXd cell_energy;  // Ψ per tet (energy density, J/m³)
+  double energy = 0;            // Σ V Ψ
+  int failed_element = -1;      // set when a material reported an inadmissible state
+  double failed_det = 0;        // det F of that element
 };
 
 class FemModel {
@@ -125,12 +125,12 @@ class FemModel {
   std::vector<int> clamp_of_node_;  // clamp index or −1
   int n_ = 0;
   SparsePattern pattern_;
-  std::vector<int> scatter_;        // per element 12×12 → pattern value index or −1
-  std::vector<double> mass_;        // pattern values
-  Eigen::VectorXd node_mass_;       // lumped nodal masses (all nodes)
+  std::vector<int> scatter_;   // per element 12×12 → pattern value index or −1
+  std::vector<double> mass_;   // pattern values
+  Eigen::VectorXd node_mass_;  // lumped nodal masses (all nodes)
   Eigen::VectorXd f_gravity_;
   std::vector<int> clamp_coupled_elements_;  // elements with free and clamped nodes
-  std::vector<Mat9> rest_tangent_;  // per element, only when some term needs it
+  std::vector<Mat9> rest_tangent_;           // per element, only when some term needs it
 };
 
 }  // namespace kelvin

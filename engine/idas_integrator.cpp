@@ -8,8 +8,8 @@
 #include <chrono>
 
 #include "engine/dae_system.hpp"
-#include "engine/schur_solver.hpp"
 #include "engine/error.hpp"
+#include "engine/schur_solver.hpp"
 
 namespace kelvin {
 namespace {
@@ -42,8 +42,7 @@ struct IdasIntegrator::Impl {
   int failed_element = -1;
   double failed_det = 0, failed_time = 0;
 
-  Impl(const FemModel& m, const IntegratorOptions& o)
-      : model(m), opt(o), n(m.num_dofs()), dae(m) {}
+  Impl(const FemModel& m, const IntegratorOptions& o) : model(m), opt(o), n(m.num_dofs()), dae(m) {}
 
   ~Impl() {
     if (mem) IDAFree(&mem);
@@ -107,9 +106,15 @@ void error_handler(int, const char* module, const char* function, char* msg, voi
 
 /// SUNLinearSolver adapter for SchurSolver: setup factorises the matrix the
 /// Jacobian callback assembled, solve applies it; both are timed for the summary.
-IdasIntegrator::Impl* impl_of(SUNLinearSolver S) { return static_cast<IdasIntegrator::Impl*>(S->content); }
-SUNLinearSolver_Type schur_type(SUNLinearSolver) { return SUNLINEARSOLVER_DIRECT; }
-SUNLinearSolver_ID schur_id(SUNLinearSolver) { return SUNLINEARSOLVER_CUSTOM; }
+IdasIntegrator::Impl* impl_of(SUNLinearSolver S) {
+  return static_cast<IdasIntegrator::Impl*>(S->content);
+}
+SUNLinearSolver_Type schur_type(SUNLinearSolver) {
+  return SUNLINEARSOLVER_DIRECT;
+}
+SUNLinearSolver_ID schur_id(SUNLinearSolver) {
+  return SUNLINEARSOLVER_CUSTOM;
+}
 int schur_setup(SUNLinearSolver S, SUNMatrix) {
   auto* m = impl_of(S);
   const auto start = Clock::now();
@@ -214,8 +219,10 @@ bool IdasIntegrator::advance_to(double tout, double t_stop) {
   // One step at a time, so that the order of every step can be counted.
   while (m.t_solver < tout) {
     if (m.stats.steps >= m.opt.max_steps) {
-      error_ = fmt::format("stopped at t = {:.6g} s: the step limit solver.max_steps = {} was "
-                           "reached", m.t_solver, m.opt.max_steps);
+      error_ = fmt::format(
+          "stopped at t = {:.6g} s: the step limit solver.max_steps = {} was "
+          "reached",
+          m.t_solver, m.opt.max_steps);
       return false;
     }
     m.failed_element = -1;
@@ -228,8 +235,9 @@ bool IdasIntegrator::advance_to(double tout, double t_stop) {
       if (!m.fatal_message.empty())
         why += ": " + m.fatal_message;
       else if (m.failed_element >= 0)
-        why += fmt::format(": element {} is inverted or degenerate (det F = {:.3g}) at t = {:.6g} s",
-                           m.failed_element, m.failed_det, m.failed_time);
+        why +=
+            fmt::format(": element {} is inverted or degenerate (det F = {:.3g}) at t = {:.6g} s",
+                        m.failed_element, m.failed_det, m.failed_time);
       else if (!m.last_idas_message.empty())
         why += ": " + m.last_idas_message;
       error_ = fmt::format("the solver failed at t = {:.6g} s ({})", tcur, why);

@@ -19,8 +19,8 @@ struct IntegratorOptions {
   double velocity_atol_scale = 100;  // velocities use atol × this (m/s)
   int max_order = 5;
   long max_steps = 1000000;
-  double max_step = 0;               // 0 = unlimited
-  double initial_step = 0;           // 0 = IDAS's choice
+  double max_step = 0;      // 0 = unlimited
+  double initial_step = 0;  // 0 = IDAS's choice
 };
 
 struct IntegratorStats {

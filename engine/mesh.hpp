@@ -8,10 +8,10 @@
 namespace kelvin {
 
 struct Mesh {
-  Eigen::Matrix3Xd nodes;                       // rest positions, one column per node
-  Eigen::Matrix<int, 4, Eigen::Dynamic> tets;   // 0-based node indices, one column per tet
-  std::vector<int> region;                      // per-tet region label (0 when the source has none)
-  std::string source;                           // file path or generator description, for messages
+  Eigen::Matrix3Xd nodes;                      // rest positions, one column per node
+  Eigen::Matrix<int, 4, Eigen::Dynamic> tets;  // 0-based node indices, one column per tet
+  std::vector<int> region;                     // per-tet region label (0 when the source has none)
+  std::string source;                          // file path or generator description, for messages
 
   int num_nodes() const { return static_cast<int>(nodes.cols()); }
   int num_tets() const { return static_cast<int>(tets.cols()); }

@@ -39,7 +39,8 @@ class MeshTextReader {
   std::string require_line(const char* expected, bool comments = false) {
     std::string s;
     if (!next_line(s, comments))
-      throw Error(fmt::format("{}:{}: unexpected end of file, expected {}", path_, line_, expected));
+      throw Error(
+          fmt::format("{}:{}: unexpected end of file, expected {}", path_, line_, expected));
     return s;
   }
   [[noreturn]] void fail(const std::string& why) const {
@@ -65,8 +66,8 @@ class MeshTextReader {
       out.push_back(static_cast<T>(v));
     }
     if (at_least ? out.size() < n : out.size() != n)
-      fail(fmt::format("expected {}{} values for {}, found {}", at_least ? "at least " : "", n, what,
-                       out.size()));
+      fail(fmt::format("expected {}{} values for {}, found {}", at_least ? "at least " : "", n,
+                       what, out.size()));
     return out;
   }
 

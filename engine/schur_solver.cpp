@@ -47,8 +47,8 @@ bool SchurSolver::factorize() {
   auto& k = *klu_;
   // Refactor keeps the pivot order of the first factorisation; fall back to a full
   // factorisation when it turns out poor (tiny reciprocal pivot growth).
-  if (k.numeric && klu_refactor(k.colptr.data(), k.rowind.data(), S_.data(), k.symbolic,
-                                k.numeric, &k.common)) {
+  if (k.numeric &&
+      klu_refactor(k.colptr.data(), k.rowind.data(), S_.data(), k.symbolic, k.numeric, &k.common)) {
     if (klu_rcond(k.symbolic, k.numeric, &k.common) && k.common.rcond > 1e-14) return true;
   }
   if (k.numeric) klu_free_numeric(&k.numeric, &k.common);

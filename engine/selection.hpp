@@ -10,11 +10,11 @@ namespace kelvin {
 
 struct NodeSelection {
   enum class Kind { Plane, Box, Ids } kind = Kind::Plane;
-  int axis = 2;              // Plane: 0=x, 1=y, 2=z
-  double at = 0;             // Plane: coordinate of the plane
-  double tolerance = -1;     // Plane: |X_axis - at| <= tolerance; <0: 1e-6 × mesh diameter
+  int axis = 2;           // Plane: 0=x, 1=y, 2=z
+  double at = 0;          // Plane: coordinate of the plane
+  double tolerance = -1;  // Plane: |X_axis - at| <= tolerance; <0: 1e-6 × mesh diameter
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();  // Box
-  std::vector<int> ids;      // Ids: 0-based node indices
+  std::vector<int> ids;  // Ids: 0-based node indices
 };
 
 /// Sorted, unique node indices. Does not throw on an empty result: callers decide

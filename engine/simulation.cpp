@@ -47,9 +47,9 @@ std::unique_ptr<FemModel> build_model(const Scenario& s) {
   if (s.material.viscous) terms.push_back(make_term(*s.material.viscous, s.mesh.num_tets()));
   std::vector<ClampBinding> clamps;
   for (const auto& c : s.clamps) clamps.push_back({c.name, c.nodes, c.motion});
-  return std::make_unique<FemModel>(s.mesh, std::move(terms),
-                                    Eigen::VectorXd::Constant(s.mesh.num_tets(), s.material.density),
-                                    s.gravity, std::move(clamps), s.solver.lumped_mass);
+  return std::make_unique<FemModel>(
+      s.mesh, std::move(terms), Eigen::VectorXd::Constant(s.mesh.num_tets(), s.material.density),
+      s.gravity, std::move(clamps), s.solver.lumped_mass);
 }
 
 IntegratorOptions integrator_options(const SolverSpec& solver) {
@@ -83,14 +83,15 @@ std::string SimulationResult::summary() const {
           ? fmt::format("static initial state: {} Newton iterations in {} load steps; ",
                         static_result.iterations, static_result.load_steps)
           : "";
-  return statics + fmt::format(
-      "{} t = {:.6g} s in {:.3g} s wall: {} steps (mean order {:.2f};{}), {} residuals, "
-      "{} Jacobians, {} factorizations, {} linear solves, {} error-test and {} convergence "
-      "failures; {} marker frames, {} VTU frames",
-      completed ? "completed" : (interrupted ? "interrupted at" : "FAILED at"), t_reached,
-      wall_seconds, stats.steps, stats.mean_order(), orders, stats.residual_evals,
-      stats.jacobian_evals, stats.linear_setups, stats.linear_solves, stats.error_test_failures,
-      stats.convergence_failures, marker_frames, vtu_frames);
+  return statics +
+         fmt::format(
+             "{} t = {:.6g} s in {:.3g} s wall: {} steps (mean order {:.2f};{}), {} residuals, "
+             "{} Jacobians, {} factorizations, {} linear solves, {} error-test and {} convergence "
+             "failures; {} marker frames, {} VTU frames",
+             completed ? "completed" : (interrupted ? "interrupted at" : "FAILED at"), t_reached,
+             wall_seconds, stats.steps, stats.mean_order(), orders, stats.residual_evals,
+             stats.jacobian_evals, stats.linear_setups, stats.linear_solves,
+             stats.error_test_failures, stats.convergence_failures, marker_frames, vtu_frames);
 }
 
 SimulationResult run_simulation(const Scenario& s, const SimulationOptions& opt) {
@@ -151,8 +152,7 @@ SimulationResult run_simulation(const Scenario& s, const SimulationOptions& opt)
       break;
     }
     result.t_reached = t;
-    write_frame(t, t > 0 ? integrator.positions() : x0, t > 0 ? integrator.velocities() : v0,
-                what);
+    write_frame(t, t > 0 ? integrator.positions() : x0, t > 0 ? integrator.velocities() : v0, what);
     if (Clock::now() - last_flush > std::chrono::seconds(2)) {
       if (!markers.empty()) marker_csv.flush();
       last_flush = Clock::now();

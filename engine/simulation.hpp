@@ -37,9 +37,9 @@ struct SimulationResult {
 };
 
 struct SimulationOptions {
-  std::string outdir;                             // created if missing
-  const std::atomic<bool>* interrupt = nullptr;   // set by a signal handler to stop early
-  bool progress = false;                          // periodic progress lines on stderr
+  std::string outdir;                            // created if missing
+  const std::atomic<bool>* interrupt = nullptr;  // set by a signal handler to stop early
+  bool progress = false;                         // periodic progress lines on stderr
 };
 
 SimulationResult run_simulation(const Scenario& scenario, const SimulationOptions& options);

@@ -47,8 +47,8 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
   Residual R{model, t, {}, {}, {}};
   Eigen::VectorXd g, g_trial, x_trial;
   if (!R.eval(x_free, 1.0, false, g)) {
-    res.message = fmt::format("element {} is inverted in the starting configuration",
-                              R.out.failed_element);
+    res.message =
+        fmt::format("element {} is inverted in the starting configuration", R.out.failed_element);
     return res;
   }
   // Forces are compared to the load, or to the initial imbalance when there is no load.
@@ -114,8 +114,8 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
           accepted = R.eval(x_trial, target, false, g_trial, &pi_trial) &&
                      pi_trial <= pi0 + 1e-4 * alpha * slope;
         else
-          accepted = R.eval(x_trial, target, false, g_trial) &&
-                     g_trial.norm() <= (1 - 1e-4 * alpha) * g0;
+          accepted =
+              R.eval(x_trial, target, false, g_trial) && g_trial.norm() <= (1 - 1e-4 * alpha) * g0;
       }
       if (!accepted) {
         // At round-off level the residual norm cannot decrease any more.

@@ -19,10 +19,10 @@ struct StaticOptions {
 
 struct StaticResult {
   bool converged = false;
-  int iterations = 0;    // Newton iterations over all load steps
+  int iterations = 0;  // Newton iterations over all load steps
   int load_steps = 0;
-  double residual = 0;   // final relative residual
-  std::string message;   // why it failed, when it did
+  double residual = 0;  // final relative residual
+  std::string message;  // why it failed, when it did
 };
 
 /// x_free: initial guess in, equilibrium out.

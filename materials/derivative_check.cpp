@@ -36,8 +36,12 @@ double sweep(const std::function<Eigen::Matrix<double, 9, 1>(const Eigen::Vector
   return best;
 }
 
-Eigen::Matrix<double, 9, 1> vec(const Mat3& A) { return Eigen::Map<const Eigen::Matrix<double, 9, 1>>(A.data()); }
-Mat3 mat(const Eigen::VectorXd& v) { return Eigen::Map<const Mat3>(v.data()); }
+Eigen::Matrix<double, 9, 1> vec(const Mat3& A) {
+  return Eigen::Map<const Eigen::Matrix<double, 9, 1>>(A.data());
+}
+Mat3 mat(const Eigen::VectorXd& v) {
+  return Eigen::Map<const Mat3>(v.data());
+}
 
 }  // namespace
 
@@ -57,8 +61,8 @@ std::vector<MaterialState> material_test_states(const MaterialCheckOptions& opti
   for (int i = 0; i < options.random_states; ++i)
     states.push_back({"random", Mat3::Identity() + random3(0.3), random3(1.0)});
   const Mat3 R = rotation();
-  states.push_back({"compression J=0.42", R * Eigen::Vector3d(0.6, 0.8, 0.88).asDiagonal() * rotation(),
-                    random3(1.0)});
+  states.push_back({"compression J=0.42",
+                    R * Eigen::Vector3d(0.6, 0.8, 0.88).asDiagonal() * rotation(), random3(1.0)});
   states.push_back({"stretch 2x", R * Eigen::Vector3d(2.0, 0.75, 0.8).asDiagonal(), random3(1.0)});
   Mat3 shear = Mat3::Identity();
   shear(0, 1) = 0.8;
@@ -108,13 +112,11 @@ std::vector<DerivativeCheck> check_material_derivatives(const Material& material
                          fd0, r.dPdFdot, floor),
                    tol});
     if (nq > 0)
-      out.push_back({"dP/dq", s.label,
-                     sweep(
-                         [&](const Eigen::VectorXd& qv) {
-                           return stress(s.F, s.Fdot, qv.data());
-                         },
-                         Eigen::Map<const Eigen::VectorXd>(q.data(), nq), r.dPdq, floor),
-                     tol});
+      out.push_back(
+          {"dP/dq", s.label,
+           sweep([&](const Eigen::VectorXd& qv) { return stress(s.F, s.Fdot, qv.data()); },
+                 Eigen::Map<const Eigen::VectorXd>(q.data(), nq), r.dPdq, floor),
+           tol});
     if (material.has_energy()) {
       // P = ∂Ψ/∂F: differentiate the scalar energy; pack it as a 9-vector column.
       auto energy = [&](const Eigen::VectorXd& f) {

@@ -13,16 +13,16 @@
 namespace kelvin {
 
 struct DerivativeCheck {
-  std::string what;    // e.g. "dP/dF", "P = dΨ/dF", "objectivity"
-  std::string state;   // e.g. "compression J=0.45"
-  double error = 0;    // best relative error over the step sweep
+  std::string what;   // e.g. "dP/dF", "P = dΨ/dF", "objectivity"
+  std::string state;  // e.g. "compression J=0.45"
+  double error = 0;   // best relative error over the step sweep
   double tolerance = 0;
   bool passed() const { return error <= tolerance; }
 };
 
 struct MaterialCheckOptions {
   double tolerance = 1e-6;
-  int random_states = 4;       // random deformations near identity, on top of the fixed set
+  int random_states = 4;  // random deformations near identity, on top of the fixed set
   std::uint64_t seed = 20261122;
 };
 

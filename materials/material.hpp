@@ -20,20 +20,20 @@ using Mat9 = Eigen::Matrix<double, 9, 9>;
 using Mat9X = Eigen::Matrix<double, 9, Eigen::Dynamic>;
 
 struct ParamInfo {
-  std::string name;        // key in the scenario file, e.g. "lambda"
-  std::string unit;        // e.g. "Pa", "Pa s", "1"
+  std::string name;  // key in the scenario file, e.g. "lambda"
+  std::string unit;  // e.g. "Pa", "Pa s", "1"
   std::string description;
   double default_value = 0;
   double lower = -1e300, upper = 1e300;  // admissible closed range
-  bool positive = false;   // strictly positive: the fitter may optimise log q
+  bool positive = false;                 // strictly positive: the fitter may optimise log q
 };
 
 /// What a caller wants from one evaluation (bit mask).
 enum Request : unsigned {
   kStress = 1u,
-  kTangent = 2u,         // dP/dF
-  kRateTangent = 4u,     // dP/dḞ
-  kParamDerivative = 8u, // dP/dq
+  kTangent = 2u,          // dP/dF
+  kRateTangent = 4u,      // dP/dḞ
+  kParamDerivative = 8u,  // dP/dq
   kEnergy = 16u,
 };
 
@@ -52,7 +52,7 @@ struct MaterialResponse {
   Mat3 P = Mat3::Zero();
   Mat9 dPdF = Mat9::Zero();
   Mat9 dPdFdot = Mat9::Zero();
-  Mat9X dPdq;                 // 9 × params().size()
+  Mat9X dPdq;  // 9 × params().size()
   double energy = 0;
 };
 

@@ -21,8 +21,9 @@ extern "C" {
 #define KELVIN_PLUGIN_ABI_MAJOR 1
 #define KELVIN_PLUGIN_ABI_MINOR 0
 #define KELVIN_PLUGIN_ABI_PATCH 0
-#define KELVIN_PLUGIN_ABI_VERSION \
-  ((uint32_t)((KELVIN_PLUGIN_ABI_MAJOR << 16) | (KELVIN_PLUGIN_ABI_MINOR << 8) | KELVIN_PLUGIN_ABI_PATCH))
+#define KELVIN_PLUGIN_ABI_VERSION                                                \
+  ((uint32_t)((KELVIN_PLUGIN_ABI_MAJOR << 16) | (KELVIN_PLUGIN_ABI_MINOR << 8) | \
+              KELVIN_PLUGIN_ABI_PATCH))
 
 typedef struct kelvin_param_info {
   const char* name;

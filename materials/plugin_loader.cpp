@@ -30,8 +30,8 @@ std::shared_ptr<Library> open_library(const std::string& path) {
     const char* err = dlerror();
     throw Error("cannot load material plugin " + path + ": " + (err ? err : "unknown error"));
   }
-  auto version_fn =
-      reinterpret_cast<kelvin_plugin_abi_version_fn>(dlsym(lib->handle, "kelvin_plugin_abi_version"));
+  auto version_fn = reinterpret_cast<kelvin_plugin_abi_version_fn>(
+      dlsym(lib->handle, "kelvin_plugin_abi_version"));
   if (!version_fn)
     throw Error("material plugin " + path +
                 " does not export kelvin_plugin_abi_version(): is it a kelvin material plugin? "
@@ -101,7 +101,8 @@ class PluginMaterial final : public Material {
     auto check = [&](const char* what, const double* a, long size) {
       if (!a) return;
       for (long k = 0; k < size; ++k)
-        if (!std::isfinite(a[k])) throw Error(where(in) + " returned a non-finite value in " + what);
+        if (!std::isfinite(a[k]))
+          throw Error(where(in) + " returned a non-finite value in " + what);
     };
     check("P", r.P, 9);
     check("dP/dF", r.dPdF, 81);
@@ -146,8 +147,8 @@ std::unique_ptr<Material> load_plugin_material(const std::string& path, const st
     if (name == lib->descs[k].name) return std::make_unique<PluginMaterial>(lib, &lib->descs[k]);
     available += (k ? ", " : "") + std::string(lib->descs[k].name);
   }
-  throw Error("material plugin " + path + " has no model '" + name + "' (it exports: " +
-              available + ")");
+  throw Error("material plugin " + path + " has no model '" + name + "' (it exports: " + available +
+              ")");
 }
 
 }  // namespace kelvin

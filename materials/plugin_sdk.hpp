@@ -108,16 +108,15 @@ int export_models(const kelvin_material_desc** out) {
 
 }  // namespace kelvin::plugin
 
-#define KELVIN_EXPORT_MATERIALS(...)                                                   \
-  extern "C" __attribute__((visibility("default"))) uint32_t kelvin_plugin_abi_version( \
-      void) {                                                                          \
-    return KELVIN_PLUGIN_ABI_VERSION;                                                  \
-  }                                                                                    \
-  extern "C" __attribute__((visibility("default"))) int kelvin_plugin_materials(       \
-      const kelvin_material_desc** out) {                                              \
-    try {                                                                              \
-      return ::kelvin::plugin::export_models<__VA_ARGS__>(out);                        \
-    } catch (...) {                                                                    \
-      return -1;                                                                       \
-    }                                                                                  \
+#define KELVIN_EXPORT_MATERIALS(...)                                                           \
+  extern "C" __attribute__((visibility("default"))) uint32_t kelvin_plugin_abi_version(void) { \
+    return KELVIN_PLUGIN_ABI_VERSION;                                                          \
+  }                                                                                            \
+  extern "C" __attribute__((visibility("default"))) int kelvin_plugin_materials(               \
+      const kelvin_material_desc** out) {                                                      \
+    try {                                                                                      \
+      return ::kelvin::plugin::export_models<__VA_ARGS__>(out);                                \
+    } catch (...) {                                                                            \
+      return -1;                                                                               \
+    }                                                                                          \
   }

@@ -1,7 +1,7 @@
 #include "materials/power_law.hpp"
 
-#include <cfloat>
 #include <Eigen/LU>
+#include <cfloat>
 #include <cmath>
 #include <unsupported/Eigen/AutoDiff>
 

@@ -5,8 +5,12 @@ namespace {
 
 using Vec9 = Eigen::Matrix<double, 9, 1>;
 
-Vec9 vec(const Mat3& A) { return Eigen::Map<const Vec9>(A.data()); }
-Mat3 mat(const Vec9& a) { return Eigen::Map<const Mat3>(a.data()); }
+Vec9 vec(const Mat3& A) {
+  return Eigen::Map<const Vec9>(A.data());
+}
+Mat3 mat(const Vec9& a) {
+  return Eigen::Map<const Mat3>(a.data());
+}
 
 /// ∂P/∂F at rest of an isotropic solid with λ = μ = 1: C₀:ε = tr(ε) I + ε + εᵀ.
 Mat9 unit_isotropic_tangent() {

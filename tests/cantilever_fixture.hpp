@@ -7,8 +7,8 @@
 #include <memory>
 
 #include "engine/fem_model.hpp"
-#include "engine/mesh.hpp"
 #include "engine/idas_integrator.hpp"
+#include "engine/mesh.hpp"
 #include "engine/selection.hpp"
 #include "engine/static_solver.hpp"
 
@@ -39,10 +39,12 @@ inline Beam make_beam(int cells_across, double gravity, std::vector<MaterialTerm
   NodeSelection root;
   root.axis = 0;
   root.at = 0;
-  b.model = std::make_unique<FemModel>(
-      b.mesh, std::move(terms), Eigen::VectorXd::Constant(ne, kRho), Eigen::Vector3d(0, 0, -gravity),
-      std::vector<ClampBinding>{{"root", select_nodes(b.mesh, root), std::make_shared<FixedMotion>()}},
-      true);
+  b.model =
+      std::make_unique<FemModel>(b.mesh, std::move(terms), Eigen::VectorXd::Constant(ne, kRho),
+                                 Eigen::Vector3d(0, 0, -gravity),
+                                 std::vector<ClampBinding>{{"root", select_nodes(b.mesh, root),
+                                                            std::make_shared<FixedMotion>()}},
+                                 true);
   return b;
 }
 
@@ -71,7 +73,8 @@ struct FreeVibration {
 };
 
 /// Releases the beam from its static deflection under gravity with gravity then
-/// switched off (undamped unless `damping` terms are given), sampling tip deflection and total energy.
+/// switched off (undamped unless `damping` terms are given), sampling tip deflection and total
+/// energy.
 inline FreeVibration release(int cells_across, double duration, int samples, double rtol,
                              std::vector<MaterialTerm> damping = {}) {
   Beam loaded = make_beam(cells_across, kG);
@@ -120,6 +123,5 @@ inline double crossing_frequency(const FreeVibration& fv) {
   const double half_period = (crossings.back() - crossings.front()) / (crossings.size() - 1);
   return 1.0 / (2 * half_period);
 }
-
 
 }  // namespace kelvin::test

@@ -7,9 +7,9 @@
 #include <random>
 
 #include "engine/dae_system.hpp"
-#include "engine/schur_solver.hpp"
 #include "engine/fem_model.hpp"
 #include "engine/mesh.hpp"
+#include "engine/schur_solver.hpp"
 #include "engine/selection.hpp"
 #include "engine/static_solver.hpp"
 
@@ -22,7 +22,8 @@ std::vector<MaterialTerm> materials(int ne, bool viscous, double h_index = 0.7) 
   Eigen::Vector2d lame(3e4, 1e4);
   t.push_back({create_builtin_material("neo-hookean"), lame.replicate(1, ne), {}});
   if (viscous)
-    t.push_back({create_builtin_material("power-law"), Eigen::Vector2d(5.0, h_index).replicate(1, ne), {}});
+    t.push_back(
+        {create_builtin_material("power-law"), Eigen::Vector2d(5.0, h_index).replicate(1, ne), {}});
   return t;
 }
 
@@ -70,8 +71,9 @@ TEST_P(JacobianTest, NewtonMatrixMatchesFiniteDifferencesOfTheResidual) {
   auto motion = std::make_shared<SinusoidMotion>(
       std::vector<Sinusoid>{{0.003, 7, 0.3, Eigen::Vector3d::UnitY()}},
       std::vector<Sinusoid>{{0.2, 5, 0.1}}, Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero());
-  FemModel model(mesh, materials(mesh.num_tets(), true), Eigen::VectorXd::Constant(mesh.num_tets(), 900),
-                 {0, 0, -9.81}, {{"base", select_nodes(mesh, sel), motion}}, lumped);
+  FemModel model(mesh, materials(mesh.num_tets(), true),
+                 Eigen::VectorXd::Constant(mesh.num_tets(), 900), {0, 0, -9.81},
+                 {{"base", select_nodes(mesh, sel), motion}}, lumped);
   DaeSystem dae(model);
   const int n = model.num_dofs(), N = dae.size();
 
@@ -153,8 +155,9 @@ TEST(RigidMotion, InternalForcesVanishUnderRigidMotion) {
       std::vector<Sinusoid>{{0.05, 3, 0.4, Eigen::Vector3d(1, 2, 2).normalized()}},
       std::vector<Sinusoid>{{1.2, 2, 0.9}}, Eigen::Vector3d(1, -1, 2).normalized(),
       Eigen::Vector3d(0.01, 0.02, -0.01));
-  FemModel model(mesh, materials(mesh.num_tets(), true), Eigen::VectorXd::Constant(mesh.num_tets(), 1000),
-                 Eigen::Vector3d::Zero(), {{"base", select_nodes(mesh, sel), motion}}, true);
+  FemModel model(mesh, materials(mesh.num_tets(), true),
+                 Eigen::VectorXd::Constant(mesh.num_tets(), 1000), Eigen::Vector3d::Zero(),
+                 {{"base", select_nodes(mesh, sel), motion}}, true);
   for (double t : {0.0, 0.11, 0.37}) {
     const RigidPose pose = motion->at(t);
     Eigen::Matrix3Xd x(3, mesh.num_nodes()), v(3, mesh.num_nodes());

@@ -65,13 +65,13 @@ TEST(Cantilever, StaticTipDeflectionConvergesToEulerBernoulli) {
   // linear elements on the two finest meshes.
   const Richardson observed = extrapolate(h, w);
   const double limit = w[2] + (w[2] - w[1]) / (std::pow(h[1] / h[2], 2) - 1);
-  std::printf("  observed order %.2f over the three meshes; Richardson (p = 2) deflection %.6e "
-              "(%.2f%% from theory)\n",
-              observed.order, limit, 100 * (limit / theory - 1));
+  std::printf(
+      "  observed order %.2f over the three meshes; Richardson (p = 2) deflection %.6e "
+      "(%.2f%% from theory)\n",
+      observed.order, limit, 100 * (limit / theory - 1));
   EXPECT_GT(observed.order, 0.5);
   EXPECT_NEAR(limit, theory, 0.02 * theory);
 }
-
 
 TEST(Cantilever, FirstBendingFrequencyConvergesToEulerBernoulli) {
   const double f_theory = theory_frequency();
@@ -87,8 +87,9 @@ TEST(Cantilever, FirstBendingFrequencyConvergesToEulerBernoulli) {
   }
   EXPECT_LT(std::abs(f[2] - f_theory), std::abs(f[0] - f_theory));
   const Richardson R = extrapolate(h, f);
-  std::printf("  observed order %.2f, Richardson-extrapolated frequency %.5f Hz (%.2f%% from theory)\n",
-              R.order, R.limit, 100 * (R.limit / f_theory - 1));
+  std::printf(
+      "  observed order %.2f, Richardson-extrapolated frequency %.5f Hz (%.2f%% from theory)\n",
+      R.order, R.limit, 100 * (R.limit / f_theory - 1));
   EXPECT_NEAR(R.limit, f_theory, 0.03 * f_theory);
 }
 

@@ -53,13 +53,15 @@ TEST(Cli, HelpListsSubcommands) {
 }
 
 TEST(Cli, MissingScenarioIsAnInputError) {
-  const CliRun r = run_kelvin("simulate /nonexistent/scenario.yaml -o " + scratch("missing").string());
+  const CliRun r =
+      run_kelvin("simulate /nonexistent/scenario.yaml -o " + scratch("missing").string());
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("/nonexistent/scenario.yaml"), std::string::npos) << r.out;
 }
 
 TEST(Cli, BadValueNamesFileLineColumnAndKey) {
-  const CliRun r = run_kelvin("simulate " + kData + "bad-density.yaml -o " + scratch("bad").string());
+  const CliRun r =
+      run_kelvin("simulate " + kData + "bad-density.yaml -o " + scratch("bad").string());
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("bad-density.yaml:4:12: material.density"), std::string::npos) << r.out;
 }
@@ -67,7 +69,7 @@ TEST(Cli, BadValueNamesFileLineColumnAndKey) {
 TEST(Cli, CantileverExampleRunsAndSags) {
   const fs::path out = scratch("cantilever");
   const CliRun r = run_kelvin("simulate " + kExamples + "cantilever-gravity.yaml --end 0.2 -q -o " +
-                       out.string());
+                              out.string());
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("completed t = 0.2"), std::string::npos) << r.out;
   ASSERT_TRUE(fs::exists(out / "summary.txt"));

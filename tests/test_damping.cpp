@@ -33,7 +33,8 @@ double decay_rate(const FreeVibration& fv) {
   // Skip the first extremum: higher modes (damped faster) still contribute there.
   const size_t n = t.size() - 1;
   double st = 0, sa = 0, stt = 0, sta = 0;
-  for (size_t k = 1; k < t.size(); ++k) st += t[k], sa += lnA[k], stt += t[k] * t[k], sta += t[k] * lnA[k];
+  for (size_t k = 1; k < t.size(); ++k)
+    st += t[k], sa += lnA[k], stt += t[k] * t[k], sta += t[k] * lnA[k];
   return -(n * sta - st * sa) / (n * stt - st * st);
 }
 

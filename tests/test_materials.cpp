@@ -17,8 +17,8 @@ void expect_all_pass(const std::string& model, const std::vector<double>& q) {
   const auto checks = check_material_derivatives(*m, q);
   ASSERT_FALSE(checks.empty());
   for (const auto& c : checks)
-    EXPECT_TRUE(c.passed()) << model << ": " << c.what << " at " << c.state
-                            << " relative error " << c.error << " > " << c.tolerance;
+    EXPECT_TRUE(c.passed()) << model << ": " << c.what << " at " << c.state << " relative error "
+                            << c.error << " > " << c.tolerance;
 }
 
 }  // namespace
@@ -27,7 +27,9 @@ TEST(Materials, NeoHookeanDerivativesMatchFiniteDifferences) {
   expect_all_pass("neo-hookean", {2.5e4, 1.0e4});
 }
 
-TEST(Materials, NewtonianDerivativesMatchFiniteDifferences) { expect_all_pass("newtonian", {3.0}); }
+TEST(Materials, NewtonianDerivativesMatchFiniteDifferences) {
+  expect_all_pass("newtonian", {3.0});
+}
 
 TEST(Materials, PowerLawDerivativesMatchFiniteDifferences) {
   expect_all_pass("power-law", {12.0, 0.6});

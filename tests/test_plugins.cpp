@@ -40,7 +40,8 @@ TEST(Plugins, ExamplePluginLoadsAndPassesDerivativeChecks) {
   EXPECT_TRUE(m->has_energy());
   const auto checks = check_material_derivatives(*m, {2e4, 5e3, 3e4});
   ASSERT_FALSE(checks.empty());
-  for (const auto& c : checks) EXPECT_TRUE(c.passed()) << c.what << " at " << c.state << ": " << c.error;
+  for (const auto& c : checks)
+    EXPECT_TRUE(c.passed()) << c.what << " at " << c.state << ": " << c.error;
 }
 
 TEST(Plugins, ExamplePluginWithoutStiffeningIsLinearElasticAtSmallStrain) {
@@ -69,7 +70,8 @@ TEST(Plugins, MissingSymbolIsRefusedByName) {
 }
 
 TEST(Plugins, NotALibraryAndMissingFileAreErrors) {
-  EXPECT_NE(load_error(KELVIN_TEST_DATA "/plugins/not-a-plugin.so", "x").find("cannot load material plugin"),
+  EXPECT_NE(load_error(KELVIN_TEST_DATA "/plugins/not-a-plugin.so", "x")
+                .find("cannot load material plugin"),
             std::string::npos);
   EXPECT_NE(load_error("/nonexistent/libnothing.so", "x").find("/nonexistent/libnothing.so"),
             std::string::npos);

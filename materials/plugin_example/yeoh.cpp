@@ -2,8 +2,8 @@
 /// Example kelvin material plugin: a compressible Yeoh-type solid,
 ///   Ψ = c1 (I₁ − 3) + c2 (I₁ − 3)² − 2 c1 ln J + λ/2 (ln J)²,   I₁ = tr FᵀF,
 ///   P = 2 (c1 + 2 c2 (I₁ − 3)) F + (λ ln J − 2 c1) F⁻ᵀ.
-/// At small strain it is linear elasticity with shear modulus μ = 2 c1 and Lamé λ; c2 stiffens large
-/// stretches. Check it with `kelvin check-material build/libyeoh_plugin.so`.
+/// At small strain it is linear elasticity with shear modulus μ = 2 c1 and Lamé λ; c2 stiffens
+/// large stretches. Check it with `kelvin check-material build/libyeoh_plugin.so`.
 #include <Eigen/LU>
 #include <cmath>
 
@@ -35,7 +35,8 @@ class Yeoh final : public Material {
     const Mat3 G = F.inverse().transpose();
     const double I1m3 = F.squaredNorm() - 3, lnJ = std::log(J);
     const double a = c1 + 2 * c2 * I1m3, b = lambda * lnJ - 2 * c1;
-    if (request & kEnergy) out.energy = c1 * I1m3 + c2 * I1m3 * I1m3 - 2 * c1 * lnJ + 0.5 * lambda * lnJ * lnJ;
+    if (request & kEnergy)
+      out.energy = c1 * I1m3 + c2 * I1m3 * I1m3 - 2 * c1 * lnJ + 0.5 * lambda * lnJ * lnJ;
     if (request & kStress) out.P = 2 * a * F + b * G;
     if (request & kTangent) {
       // d(2aF) = 2a I + 8 c2 F⊗F ;  d(b G) = λ G⊗G − b G_il G_kj
