@@ -93,7 +93,8 @@ class PluginMaterial final : public Material {
         (request & kParamDerivative) ? out.dPdq.data() : nullptr,
         (request & kEnergy) ? &out.energy : nullptr,
     };
-    char msg[512] = {0};
+    char msg[512];
+    msg[0] = '\0';
     const int status = d_->evaluate(&p, request, &r, msg, sizeof msg);
     if (status == KELVIN_INADMISSIBLE) return false;
     if (status != KELVIN_OK)

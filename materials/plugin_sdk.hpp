@@ -49,7 +49,8 @@ class Exported {
       p.q = in->q;
       p.state = in->state;
       p.element = in->element;
-      MaterialResponse r;
+      // Reused across calls: a fresh response zero-fills 171 doubles every time.
+      thread_local MaterialResponse r;
       if (!model_->evaluate(p, request, r)) return KELVIN_INADMISSIBLE;
       if (out->P) Eigen::Map<Mat3>(out->P) = r.P;
       if (out->dPdF) Eigen::Map<Mat9>(out->dPdF) = r.dPdF;
