@@ -4,6 +4,7 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <limits>
 
 #include "engine/error.hpp"
 
@@ -57,6 +58,17 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
   build_pattern();
   build_mass();
   update_rest_tangents();
+}
+
+std::pair<int, double> FemModel::most_compressed_element(const Eigen::Matrix3Xd& x) const {
+  std::pair<int, double> worst{-1, std::numeric_limits<double>::infinity()};
+  Eigen::Matrix<double, 3, 4> xe;
+  for (int e = 0; e < mesh_.num_tets(); ++e) {
+    for (int a = 0; a < 4; ++a) xe.col(a) = x.col(elements_[e].nodes[a]);
+    const double det = (xe * elements_[e].G.transpose()).determinant();
+    if (det < worst.second) worst = {e, det};
+  }
+  return worst;
 }
 
 void FemModel::update_rest_tangents() {

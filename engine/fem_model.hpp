@@ -98,6 +98,9 @@ class FemModel {
   bool assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const AssemblyRequest& req,
                 AssemblyOutput& out) const;
 
+  /// The element with the smallest det F at full positions x, and that det F.
+  std::pair<int, double> most_compressed_element(const Eigen::Matrix3Xd& x) const;
+
   /// Recomputes the elastic rest tangents C₀ (∂P/∂F at F = I per element) that
   /// stiffness-proportional damping uses; call after changing elastic parameters.
   void update_rest_tangents();

@@ -219,10 +219,15 @@ bool IdasIntegrator::advance_to(double tout, double t_stop) {
   // One step at a time, so that the order of every step can be counted.
   while (m.t_solver < tout) {
     if (m.stats.steps >= m.opt.max_steps) {
+      // Most often the steps shrank because some element is collapsing: say which.
+      IDAGetDky(m.mem, m.t_solver, 0, m.yout);
+      Eigen::Matrix3Xd x, v;
+      m.model.expand(m.t_solver, N_VGetArrayPointer(m.yout), nullptr, x, v);
+      const auto [element, det] = m.model.most_compressed_element(x);
       error_ = fmt::format(
-          "stopped at t = {:.6g} s: the step limit solver.max_steps = {} was "
-          "reached",
-          m.t_solver, m.opt.max_steps);
+          "stopped at t = {:.6g} s: the step limit solver.max_steps = {} was reached (the most "
+          "compressed element is {}, det F = {:.3g})",
+          m.t_solver, m.opt.max_steps, element, det);
       return false;
     }
     m.failed_element = -1;

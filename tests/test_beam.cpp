@@ -6,8 +6,6 @@
 #include <cmath>
 #include <cstdio>
 
-#include <Eigen/CholmodSupport>
-
 #include "engine/fem_model.hpp"
 #include "engine/idas_integrator.hpp"
 #include "engine/mesh.hpp"
@@ -75,40 +73,11 @@ TEST(Cantilever, StaticTipDeflectionConvergesToEulerBernoulli) {
   EXPECT_NEAR(limit, theory, 0.02 * theory);
 }
 
-namespace {
-
-/// Lowest eigenfrequency (Hz) of K₀ φ = ω² M φ for the beam at rest, by inverse
-/// iteration with a Cholesky factorisation of K₀ (the clamped bar is SPD). The two
-/// first bending modes (y and z) coincide; the next mode is far above, so a few
-/// tens of iterations converge to round-off.
-double modal_frequency(const Beam& b) {
-  Eigen::Matrix3Xd x = b.mesh.nodes, v = Eigen::Matrix3Xd::Zero(3, b.mesh.num_nodes());
-  AssemblyRequest req;
-  req.stiffness = true;
-  AssemblyOutput out;
-  EXPECT_TRUE(b.model->assemble(x, v, req, out));
-  const Eigen::SparseMatrix<double> K = to_sparse_matrix(b.model->pattern(), out.K);
-  const Eigen::SparseMatrix<double> M = to_sparse_matrix(b.model->pattern(), b.model->mass());
-  Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower> chol(K);
-  EXPECT_EQ(chol.info(), Eigen::Success);
-  Eigen::VectorXd phi = Eigen::VectorXd::Ones(K.rows()), next;
-  double lambda = 0;
-  for (int it = 0; it < 60; ++it) {
-    next = chol.solve(M * phi);
-    lambda = phi.dot(M * phi) / phi.dot(M * next);  // Rayleigh quotient of the pair
-    phi = next / std::sqrt(next.dot(M * next));
-  }
-  lambda = phi.dot(K * phi) / phi.dot(M * phi);
-  return std::sqrt(lambda) / (2 * M_PI);
-}
-
-}  // namespace
-
 TEST(Cantilever, FreeVibrationMatchesTheModalFrequencyOfTheMesh) {
   // Time integration against the eigenfrequency of the same discrete model: what
   // IDAS adds (phase error) must be small against the discretisation error.
   const double f_theory = theory_frequency();
-  const double f_modal = modal_frequency(make_beam(2, 0.0));
+  const double f_modal = first_mode(make_beam(2, 0.0)).frequency;
   const double f_dynamic = crossing_frequency(release(2, 3.5 / f_theory, 240, 1e-7));
   std::printf("  2 cells across: released free vibration %.5f Hz, modal %.5f Hz (%.3f%% apart)\n",
               f_dynamic, f_modal, 100 * (f_dynamic / f_modal - 1));
@@ -121,7 +90,7 @@ TEST(Cantilever, FirstBendingFrequencyConvergesToEulerBernoulli) {
   double h[3], f[3];
   for (int k = 0; k < 3; ++k) {
     h[k] = kHeight / cells[k];
-    f[k] = modal_frequency(make_beam(cells[k], 0.0));
+    f[k] = first_mode(make_beam(cells[k], 0.0)).frequency;
     std::printf("  %d cells across: first bending frequency %.5f Hz (theory %.5f, ratio %.4f)\n",
                 cells[k], f[k], f_theory, f[k] / f_theory);
   }
