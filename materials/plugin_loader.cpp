@@ -99,11 +99,13 @@ class PluginMaterial final : public Material {
     if (status == KELVIN_INADMISSIBLE) return false;
     if (status != KELVIN_OK)
       throw Error(where(in) + " failed: " + (msg[0] ? std::string(msg) : "no message"));
+    // x·0 is NaN exactly when x is NaN or ±Inf, so one sum checks a whole array;
+    // Eigen's packet reduction vectorises it (an element-wise loop cost 7% of a
+    // neo-Hookean assembly).
     auto check = [&](const char* what, const double* a, long size) {
       if (!a) return;
-      for (long k = 0; k < size; ++k)
-        if (!std::isfinite(a[k]))
-          throw Error(where(in) + " returned a non-finite value in " + what);
+      if (!std::isfinite((Eigen::Map<const Eigen::ArrayXd>(a, size) * 0.0).sum()))
+        throw Error(where(in) + " returned a non-finite value in " + what);
     };
     check("P", r.P, 9);
     check("dP/dF", r.dPdF, 81);
