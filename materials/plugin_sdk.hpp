@@ -8,6 +8,8 @@
 /// The macro generates the two C entry points of plugin_abi.h. Only plain C data
 /// crosses the library boundary; exceptions thrown by a model are caught here and
 /// reported to kelvin as KELVIN_FAILED with their message.
+#include <pthread.h>
+
 #include <cstring>
 #include <exception>
 #include <memory>
@@ -18,6 +20,18 @@
 #include "materials/plugin_abi.h"
 
 namespace kelvin::plugin {
+
+/// Response reused across calls: a fresh one zero-fills 171 doubles each time.
+/// The first evaluating thread gets a plain static (a thread_local in a dlopen'ed
+/// module costs a __tls_get_addr call, 3% of a neo-Hookean assembly); any other
+/// thread gets its own thread_local, so concurrent evaluation stays safe.
+inline MaterialResponse& scratch_response() {
+  static const pthread_t first = pthread_self();
+  static MaterialResponse first_thread;
+  if (pthread_equal(pthread_self(), first)) return first_thread;
+  thread_local MaterialResponse other;
+  return other;
+}
 
 /// Owns one model and its C description (the strings live as long as the plugin).
 class Exported {
@@ -49,8 +63,7 @@ class Exported {
       p.q = in->q;
       p.state = in->state;
       p.element = in->element;
-      // Reused across calls: a fresh response zero-fills 171 doubles every time.
-      thread_local MaterialResponse r;
+      MaterialResponse& r = scratch_response();
       if (!model_->evaluate(p, request, r)) return KELVIN_INADMISSIBLE;
       if (out->P) Eigen::Map<Mat3>(out->P) = r.P;
       if (out->dPdF) Eigen::Map<Mat9>(out->dPdF) = r.dPdF;
