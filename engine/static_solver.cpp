@@ -71,7 +71,8 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
     Eigen::VectorXd x = x_good;
     bool ok = false;
     for (int it = 0; it < opt.max_iterations; ++it) {
-      if (!R.eval(x, target, true, g)) break;
+      double pi0 = 0;  // potential energy at x, for the line search
+      if (!R.eval(x, target, true, g, hyperelastic ? &pi0 : nullptr)) break;
       res.residual = g.norm() / scale;
       if (res.residual <= opt.tolerance) {
         ok = true;
@@ -104,9 +105,9 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
       // descends — a residual-norm search stalls on large rotations, where the
       // linearised step stretches fibres; otherwise on the residual norm.
       // Inadmissible trial states count as worse.
-      double alpha = 1, pi0 = 0, pi_trial = 0;
+      double alpha = 1, pi_trial = 0;
       const double g0 = g.norm(), slope = g.dot(dx);
-      const bool by_energy = hyperelastic && slope < 0 && R.eval(x, target, false, g_trial, &pi0);
+      const bool by_energy = hyperelastic && slope < 0;
       bool accepted = false;
       for (int ls = 0; ls < 30 && !accepted; ++ls, alpha *= 0.5) {
         x_trial = x + alpha * dx;
