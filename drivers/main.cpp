@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   int exit_code = kelvin::kExitOk;
   kelvin::register_simulate(app, exit_code);
   kelvin::register_check_material(app, exit_code);
+  kelvin::register_gradcheck(app, exit_code);
 
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);

@@ -49,17 +49,27 @@ bool DaeSystem::consistent_derivative(double t, const double* y, double* yp) {
   model_.clamp_inertia(t, clamp_inertia_);
   const Eigen::VectorXd rhs = model_.gravity_force() - out_.force - clamp_inertia_;
   for (int i = 0; i < n_; ++i) yp[i] = y[n_ + i];
-  Eigen::Map<Eigen::VectorXd> acc(yp + n_, n_);
-  const SparsePattern& P = model_.pattern();
-  if (model_.lumped_mass()) {
-    for (int j = 0; j < n_; ++j)
-      for (int p = P.colptr[j]; p < P.colptr[j + 1]; ++p)
-        if (P.rowind[p] == j) acc[j] = rhs[j] / model_.mass()[p];
-  } else {
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(to_sparse_matrix(P, model_.mass()));
-    acc = ldlt.solve(rhs);
-  }
+  mass_solve(rhs.data(), yp + n_);
   return true;
+}
+
+void DaeSystem::mass_solve(const double* rhs, double* out) {
+  using Factor = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>;
+  const SparsePattern& P = model_.pattern();
+  Eigen::Map<const Eigen::VectorXd> b(rhs, n_);
+  Eigen::Map<Eigen::VectorXd> x(out, n_);
+  if (model_.lumped_mass()) {
+    if (mass_diagonal_.empty()) {
+      mass_diagonal_.resize(n_);
+      for (int j = 0; j < n_; ++j)
+        for (int p = P.colptr[j]; p < P.colptr[j + 1]; ++p)
+          if (P.rowind[p] == j) mass_diagonal_[j] = model_.mass()[p];
+    }
+    for (int j = 0; j < n_; ++j) x[j] = b[j] / mass_diagonal_[j];
+    return;
+  }
+  if (!mass_factor_) mass_factor_ = std::make_shared<Factor>(to_sparse_matrix(P, model_.mass()));
+  x = static_cast<Factor*>(mass_factor_.get())->solve(b);
 }
 
 }  // namespace kelvin

@@ -5,6 +5,7 @@
 /// and its Newton matrix J = ∂F/∂y + c_j ∂F/∂y' = [ c_j I  −I ; K  c_j M + D ]
 /// as a 2n × 2n CSC matrix whose pattern is fixed (built from the FEM pattern once).
 #include <Eigen/Core>
+#include <memory>
 #include <vector>
 
 #include "engine/fem_model.hpp"
@@ -33,6 +34,10 @@ class DaeSystem {
   /// y' consistent with y at t: x' = v and v' = M⁻¹(f_ext − r(x, v) − M_fc a_c).
   bool consistent_derivative(double t, const double* y, double* yp);
 
+  /// out = M⁻¹ rhs over the free dofs (lumped: a division; consistent: sparse LDLᵀ,
+  /// factorised once).
+  void mass_solve(const double* rhs, double* out);
+
   const AssemblyOutput& last_assembly() const { return out_; }
 
  private:
@@ -41,6 +46,8 @@ class DaeSystem {
   Eigen::Matrix3Xd x_, v_;
   Eigen::VectorXd clamp_inertia_;
   AssemblyOutput out_;
+  std::vector<double> mass_diagonal_;  // lumped mass per free dof
+  std::shared_ptr<void> mass_factor_;  // consistent mass LDLᵀ, built on first use
 };
 
 template <class Index>

@@ -138,6 +138,7 @@ void FemModel::build_mass() {
   // its row sums are the lumped masses ρV/4.
   const int nn = mesh_.num_nodes();
   node_mass_.setZero(nn);
+  clamp_coupled_elements_.clear();
   mass_.assign(pattern_.nnz(), 0.0);
   for (int e = 0; e < mesh_.num_tets(); ++e) {
     const auto& el = elements_[e];
@@ -158,6 +159,12 @@ void FemModel::build_mass() {
   for (int a = 0; a < nn; ++a)
     for (int i = 0; i < 3; ++i)
       if (dof(a, i) >= 0) f_gravity_[dof(a, i)] = node_mass_[a] * gravity_[i];
+}
+
+void FemModel::set_density(Eigen::VectorXd density) {
+  if (density.size() != mesh_.num_tets()) throw Error("density field size does not match the mesh");
+  density_ = std::move(density);
+  build_mass();
 }
 
 Eigen::Matrix<double, 12, 12> FemModel::element_mass(int e) const {
@@ -192,6 +199,21 @@ void FemModel::expand(double t, const double* x_free, const double* v_free, Eige
         v(i, a) = v_free ? v_free[dof(a, i)] : 0.0;
       }
     }
+  }
+}
+
+void FemModel::expand_acceleration(double t, const double* a_free, Eigen::Matrix3Xd& a) const {
+  const int nn = mesh_.num_nodes();
+  a.resize(3, nn);
+  std::vector<RigidPose> poses;
+  poses.reserve(clamps_.size());
+  for (const auto& c : clamps_) poses.push_back(c.motion->at(t));
+  for (int node = 0; node < nn; ++node) {
+    const int c = clamp_of_node_[node];
+    if (c >= 0)
+      a.col(node) = poses[c].acceleration(mesh_.nodes.col(node));
+    else
+      for (int i = 0; i < 3; ++i) a(i, node) = a_free[dof(node, i)];
   }
 }
 

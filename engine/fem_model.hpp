@@ -80,11 +80,22 @@ class FemModel {
   const std::vector<double>& mass() const { return mass_; }
   /// Gravity force on the free dofs (row sums of the full mass matrix times g).
   const Eigen::VectorXd& gravity_force() const { return f_gravity_; }
+  const Eigen::Vector3d& gravity() const { return gravity_; }
+  const Eigen::VectorXd& density() const { return density_; }
+  /// Replaces the density field (per tet) and rebuilds mass and gravity.
+  void set_density(Eigen::VectorXd density);
+  /// C₀ of element e, or null when no term needs rest tangents.
+  const Mat9* rest_tangent(int e) const {
+    return rest_tangent_.empty() ? nullptr : &rest_tangent_[e];
+  }
 
   /// Full nodal positions and velocities at time t from the free-dof vectors
   /// (clamped nodes follow their motion).
   void expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
               Eigen::Matrix3Xd& v) const;
+  /// Full nodal accelerations at time t: a_free on free dofs, the clamp motion's
+  /// acceleration on clamped nodes.
+  void expand_acceleration(double t, const double* a_free, Eigen::Matrix3Xd& a) const;
   /// Free-dof vector of a full nodal field.
   void restrict(const Eigen::Matrix3Xd& full, double* free) const;
   /// M_fc a_c: inertia of the free dofs coupled to clamp accelerations (zero for

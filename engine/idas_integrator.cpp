@@ -6,6 +6,7 @@
 #include <sunmatrix/sunmatrix_sparse.h>
 
 #include <chrono>
+#include <vector>
 
 #include "engine/dae_system.hpp"
 #include "engine/error.hpp"
@@ -31,6 +32,16 @@ struct IdasIntegrator::Impl {
   SUNMatrix J = nullptr;
   SUNLinearSolver LS = nullptr;
   double t_solver = 0;  // internal time of IDAS
+  bool checkpointing = false;
+
+  // optional quadratures and forward sensitivities
+  QuadratureRhs quad_rhs;
+  N_Vector q = nullptr;
+  bool quad_error_control = false;
+  SensitivityResidual sens_res;
+  QuadratureSensitivityRhs quad_sens_rhs;
+  int ns = 0;
+  N_Vector *yS = nullptr, *ypS = nullptr, *qS = nullptr;
 
   DaeSystem dae;
   SchurSolver schur{dae};
@@ -48,8 +59,10 @@ struct IdasIntegrator::Impl {
     if (mem) IDAFree(&mem);
     if (LS) SUNLinSolFreeEmpty(LS);
     if (J) SUNMatDestroy(J);
-    for (N_Vector v : {y, yp, yout, atol})
+    for (N_Vector v : {y, yp, yout, atol, q})
       if (v) N_VDestroy(v);
+    for (N_Vector* a : {yS, ypS, qS})
+      if (a) N_VDestroyVectorArray(a, ns);
     if (ctx) SUNContext_Free(&ctx);
   }
 
@@ -81,6 +94,14 @@ struct IdasIntegrator::Impl {
     return guarded(t, stats.residual_seconds, [&] { return dae.residual(t, y, yp, r); });
   }
 
+  /// Wraps a client callback (quadrature or sensitivity): same failure rules as
+  /// the residual.
+  template <class Body>
+  int client(double t, Body body) {
+    double unused = 0;
+    return guarded(t, unused, body);
+  }
+
   int jacobian(double t, double cj, const double* y) {
     return guarded(t, stats.jacobian_seconds, [&] { return schur.assemble(t, cj, y); });
   }
@@ -97,6 +118,39 @@ int jacobian_fn(realtype t, realtype cj, N_Vector y, N_Vector, N_Vector, SUNMatr
                 N_Vector, N_Vector, N_Vector) {
   auto* impl = static_cast<IdasIntegrator::Impl*>(data);
   return impl->jacobian(t, cj, N_VGetArrayPointer(y));
+}
+
+int quadrature_fn(realtype t, N_Vector y, N_Vector yp, N_Vector q, void* data) {
+  auto* impl = static_cast<IdasIntegrator::Impl*>(data);
+  return impl->client(t, [&] {
+    return impl->quad_rhs(t, N_VGetArrayPointer(y), N_VGetArrayPointer(yp), N_VGetArrayPointer(q));
+  });
+}
+
+std::vector<double*> pointers(int n, N_Vector* v) {
+  std::vector<double*> p(n);
+  for (int i = 0; i < n; ++i) p[i] = N_VGetArrayPointer(v[i]);
+  return p;
+}
+
+int sensitivity_fn(int ns, realtype t, N_Vector y, N_Vector yp, N_Vector, N_Vector* yS,
+                   N_Vector* ypS, N_Vector* resS, void* data, N_Vector, N_Vector, N_Vector) {
+  auto* impl = static_cast<IdasIntegrator::Impl*>(data);
+  const auto s = pointers(ns, yS), sp = pointers(ns, ypS), r = pointers(ns, resS);
+  return impl->client(t, [&] {
+    return impl->sens_res(t, N_VGetArrayPointer(y), N_VGetArrayPointer(yp), ns, s.data(), sp.data(),
+                          r.data());
+  });
+}
+
+int quadrature_sensitivity_fn(int ns, realtype t, N_Vector y, N_Vector yp, N_Vector* yS, N_Vector*,
+                              N_Vector, N_Vector* qS, void* data, N_Vector, N_Vector, N_Vector) {
+  auto* impl = static_cast<IdasIntegrator::Impl*>(data);
+  const auto s = pointers(ns, yS), q = pointers(ns, qS);
+  return impl->client(t, [&] {
+    return impl->quad_sens_rhs(t, N_VGetArrayPointer(y), N_VGetArrayPointer(yp), ns, s.data(),
+                               q.data());
+  });
 }
 
 void error_handler(int, const char* module, const char* function, char* msg, void* data) {
@@ -212,6 +266,81 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   v_ = v0;
 }
 
+void IdasIntegrator::add_quadrature(int nq, QuadratureRhs rhs, bool error_control, double atol) {
+  Impl& m = *impl_;
+  m.quad_rhs = std::move(rhs);
+  m.q = N_VNew_Serial(nq, m.ctx);
+  N_VConst(0.0, m.q);
+  check(IDAQuadInit(m.mem, quadrature_fn, m.q), "IDAQuadInit");
+  m.quad_error_control = error_control;
+  if (error_control) {
+    check(IDAQuadSStolerances(m.mem, m.opt.rtol, atol), "IDAQuadSStolerances");
+    check(IDASetQuadErrCon(m.mem, SUNTRUE), "IDASetQuadErrCon");
+  }
+}
+
+Eigen::VectorXd IdasIntegrator::quadrature() const {
+  const Impl& m = *impl_;
+  if (IDAGetQuadDky(m.mem, t_, 0, m.q) < 0)
+    throw Error(fmt::format("could not interpolate the quadratures at t = {:.6g} s", t_));
+  return Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(m.q), N_VGetLength(m.q));
+}
+
+void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::MatrixXd& yS0,
+                                       const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar) {
+  Impl& m = *impl_;
+  m.sens_res = std::move(res);
+  m.ns = static_cast<int>(yS0.cols());
+  m.yS = N_VCloneVectorArray(m.ns, m.y);
+  m.ypS = N_VCloneVectorArray(m.ns, m.y);
+  for (int i = 0; i < m.ns; ++i) {
+    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.yS[i]), 2 * m.n) = yS0.col(i);
+    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.ypS[i]), 2 * m.n) = ypS0.col(i);
+  }
+  check(IDASensInit(m.mem, m.ns, IDA_STAGGERED, sensitivity_fn, m.yS, m.ypS), "IDASensInit");
+  std::vector<double> bar(pbar.data(), pbar.data() + pbar.size());
+  check(IDASetSensParams(m.mem, nullptr, bar.data(), nullptr), "IDASetSensParams");
+  check(IDASensEEtolerances(m.mem), "IDASensEEtolerances");
+  check(IDASetSensErrCon(m.mem, SUNTRUE), "IDASetSensErrCon");
+}
+
+void IdasIntegrator::add_quadrature_sensitivities(QuadratureSensitivityRhs rhs) {
+  Impl& m = *impl_;
+  m.quad_sens_rhs = std::move(rhs);
+  m.qS = N_VCloneVectorArray(m.ns, m.q);
+  for (int i = 0; i < m.ns; ++i) N_VConst(0.0, m.qS[i]);
+  check(IDAQuadSensInit(m.mem, quadrature_sensitivity_fn, m.qS), "IDAQuadSensInit");
+  if (m.quad_error_control) {
+    check(IDAQuadSensEEtolerances(m.mem), "IDAQuadSensEEtolerances");
+    check(IDASetQuadSensErrCon(m.mem, SUNTRUE), "IDASetQuadSensErrCon");
+  }
+}
+
+Eigen::MatrixXd IdasIntegrator::quadrature_sensitivities() const {
+  const Impl& m = *impl_;
+  if (IDAGetQuadSensDky(m.mem, t_, 0, m.qS) < 0)
+    throw Error(
+        fmt::format("could not interpolate the quadrature sensitivities at t = {:.6g} s", t_));
+  const int nq = static_cast<int>(N_VGetLength(m.q));
+  Eigen::MatrixXd out(nq, m.ns);
+  for (int i = 0; i < m.ns; ++i)
+    out.col(i) = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(m.qS[i]), nq);
+  return out;
+}
+
+void IdasIntegrator::record_checkpoints(long steps) {
+  check(IDAAdjInit(impl_->mem, steps, IDA_HERMITE), "IDAAdjInit");
+  impl_->checkpointing = true;
+}
+
+void* IdasIntegrator::idas_memory() const {
+  return impl_->mem;
+}
+
+void* IdasIntegrator::sundials_context() const {
+  return impl_->ctx;
+}
+
 bool IdasIntegrator::advance_to(double tout, double t_stop) {
   Impl& m = *impl_;
   const int n = m.n;
@@ -232,7 +361,10 @@ bool IdasIntegrator::advance_to(double tout, double t_stop) {
     }
     m.failed_element = -1;
     double tret = 0;
-    const int flag = IDASolve(m.mem, t_stop, &tret, m.yout, m.yp, IDA_ONE_STEP);
+    int ncheck = 0;
+    const int flag = m.checkpointing
+                         ? IDASolveF(m.mem, t_stop, &tret, m.yout, m.yp, IDA_ONE_STEP, &ncheck)
+                         : IDASolve(m.mem, t_stop, &tret, m.yout, m.yp, IDA_ONE_STEP);
     if (flag < 0) {
       double tcur = m.t_solver;
       IDAGetCurrentTime(m.mem, &tcur);

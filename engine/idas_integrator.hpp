@@ -6,6 +6,7 @@
 /// in CSC form (pattern fixed at construction) factored by KLU.
 #include <Eigen/Core>
 #include <array>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -31,6 +32,17 @@ struct IntegratorStats {
   double mean_order() const;
 };
 
+/// Integrand of quadratures ∫ q(t, y) dt carried along the forward solve.
+using QuadratureRhs = std::function<bool(double t, const double* y, const double* yp, double* q)>;
+/// Forward-sensitivity residuals F_y sᵢ + F_y' sᵢ' + F_pᵢ for i < ns.
+using SensitivityResidual =
+    std::function<bool(double t, const double* y, const double* yp, int ns, const double* const* yS,
+                       const double* const* ypS, double* const* resS)>;
+/// Sensitivities of the quadrature integrand: ∂q/∂y sᵢ (+ ∂q/∂pᵢ).
+using QuadratureSensitivityRhs =
+    std::function<bool(double t, const double* y, const double* yp, int ns, const double* const* yS,
+                       double* const* qS)>;
+
 class IdasIntegrator {
  public:
   IdasIntegrator(const FemModel& model, const IntegratorOptions& options);
@@ -42,6 +54,28 @@ class IdasIntegrator {
   /// v' from the equations of motion (x' = v). Throws kelvin::Error when the
   /// initial state is inadmissible.
   void initialize(double t0, const Eigen::VectorXd& x0, const Eigen::VectorXd& v0);
+
+  /// Adds quadratures (after initialize()): nq integrands, started at 0 and, with
+  /// `error_control`, included in the step-size control with tolerances rtol, atol.
+  void add_quadrature(int nq, QuadratureRhs rhs, bool error_control, double atol);
+  /// Quadrature values at time().
+  Eigen::VectorXd quadrature() const;
+
+  /// Forward sensitivities (after initialize(); staggered corrector): initial values
+  /// yS0, ypS0 (2n × ns) and typical parameter magnitudes pbar that scale the
+  /// sensitivity error weights. Quadrature sensitivities follow the quadrature.
+  void add_sensitivities(SensitivityResidual res, const Eigen::MatrixXd& yS0,
+                         const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar);
+  void add_quadrature_sensitivities(QuadratureSensitivityRhs rhs);
+  /// Quadrature sensitivities at time(): nq × ns.
+  Eigen::MatrixXd quadrature_sensitivities() const;
+
+  /// Records IDAS adjoint checkpoints every `steps` steps (Hermite interpolation);
+  /// after the forward solve, idas_memory() is ready for IDACreateB.
+  void record_checkpoints(long steps);
+  void* idas_memory() const;
+  /// The SUNDIALS context, for vectors of a backward problem.
+  void* sundials_context() const;
 
   /// Integrates until `tout` (never past `t_stop`), then interpolates the state at
   /// tout. Returns false on solver failure; error() then says why and at which time.

@@ -35,12 +35,17 @@ SchurSolver::~SchurSolver() = default;
 
 bool SchurSolver::assemble(double t, double cj, const double* y) {
   if (!dae_.stiffness_and_damping(t, y)) return false;
+  assemble_from_last(cj);
+  return true;
+}
+
+void SchurSolver::assemble_from_last(double cj) {
   const AssemblyOutput& out = dae_.last_assembly();
   const std::vector<double>& M = dae_.model().mass();
   for (size_t k = 0; k < S_.size(); ++k) S_[k] = out.K[k] + cj * out.D[k] + cj * cj * M[k];
+  K_ = out.K;
   D_ = out.D;
   cj_ = cj;
-  return true;
 }
 
 bool SchurSolver::factorize() {
@@ -68,6 +73,20 @@ void SchurSolver::solve(const double* b, double* x) {
   for (int i = 0; i < n_; ++i) {
     x[i] = rhs_[i];
     x[n_ + i] = cj_ * rhs_[i] - r1_[i];
+  }
+}
+
+void SchurSolver::solve_adjoint(const double* b, double* x) {
+  const SparsePattern& P = dae_.model().pattern();
+  const double cB = -cj_;
+  r1_ = Eigen::Map<const Eigen::VectorXd>(b, n_);
+  rhs_ = cB * Eigen::Map<const Eigen::VectorXd>(b + n_, n_) - r1_;
+  klu_tsolve(klu_->symbolic, klu_->numeric, n_, 1, rhs_.data(), &klu_->common);
+  for (int c = 0; c < n_; ++c) {
+    double ktb = 0;  // (Kᵀ x₂)_c
+    for (int p = P.colptr[c]; p < P.colptr[c + 1]; ++p) ktb += K_[p] * rhs_[P.rowind[p]];
+    x[c] = (r1_[c] + ktb) / cB;
+    x[n_ + c] = rhs_[c];
   }
 }
 

@@ -25,10 +25,19 @@ class SchurSolver {
 
   /// Assembles S at (t, y) for c_j; false when an element is inadmissible.
   bool assemble(double t, double cj, const double* y);
+  /// Forms S for c_j from the K and D the DaeSystem assembled last (the caller made
+  /// sure they belong to the wanted state): saves an assembly when the residual
+  /// already needed them.
+  void assemble_from_last(double cj);
   /// Factorises the last assembled S; false when it is singular.
   bool factorize();
   /// x = J⁻¹ b for the J of the last assemble()/factorize() (x may alias b).
   void solve(const double* b, double* x);
+  /// x = J_B⁻¹ b for the Newton matrix of the adjoint problem,
+  ///   J_B = [ c_B I   −Kᵀ ; I   c_B M − Dᵀ ],
+  /// using the S of assemble(t, −c_B, y): b₂ solves Sᵀ x₂ = c_B r₂ − r₁ and
+  /// x₁ = (r₁ + Kᵀ x₂)/c_B — the transposed factorisation, no new pattern.
+  void solve_adjoint(const double* b, double* x);
   double cj() const { return cj_; }
 
  private:
@@ -36,7 +45,7 @@ class SchurSolver {
   DaeSystem& dae_;
   int n_;
   double cj_ = 0;
-  std::vector<double> S_, D_;  // values in the FEM pattern
+  std::vector<double> S_, K_, D_;  // values in the FEM pattern
   Eigen::VectorXd rhs_, r1_;
   std::unique_ptr<Klu> klu_;
 };

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/csv.hpp"
 #include "engine/markers.hpp"
 #include "engine/mesh.hpp"
 #include "engine/rigid_motion.hpp"
@@ -40,6 +41,7 @@ struct ClampSpec {
 struct MarkersSpec {
   std::vector<MarkerEmbedding> embedded;  // empty when the scenario has no markers
   std::string observed_path;              // optional captured tracks ("" if none)
+  MarkerTracks observed;                  // the tracks read from observed_path
 };
 
 struct TimeSpec {
@@ -59,6 +61,43 @@ struct SolverSpec {
   bool lumped_mass = true;
 };
 
+/// One fitted quantity of the `fit:` section. Values are in model units (Pa, kg/m³…);
+/// the log transform, when on, is applied by the parameter map.
+struct FitParameterSpec {
+  std::string target;  // "elastic.<param>", "viscous.<param>" or "density"
+  enum class Scope { Global, PerRegion, PerElement, Boxes } scope = Scope::Global;
+  /// Scope::Boxes: an element whose centroid lies in box k gets parameter k (first
+  /// match); elements in no box share one more parameter.
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;  // (min, max)
+  std::optional<double> initial;  // default: the scenario's value
+  double lower = 0, upper = 0;    // admissible range (defaults from the model's ParamInfo)
+  bool log = false;               // optimise ln q (default: true for strictly positive q)
+  int line = 0;                   // 1-based line in the scenario file, for messages
+};
+
+/// The marker misfit Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ − x̄ᵢ‖² dt over a time window.
+struct ObjectiveSpec {
+  std::map<std::string, double> weights;  // marker name → wᵢ (1 when absent; 0 drops it)
+  double window_begin = 0;                // s
+  double window_end = -1;                 // s; < 0 = the end of the run
+};
+
+struct FitSpec {
+  bool present = false;
+  std::vector<FitParameterSpec> parameters;
+  ObjectiveSpec objective;
+  std::string gradient = "adjoint";  // adjoint | forward | none
+  std::string algorithm = "lbfgs";   // lbfgs | mma | slsqp | bobyqa
+  int max_evaluations = 200;
+  double ftol_rel = 1e-10, xtol_rel = 1e-8;
+  double max_seconds = 0;                   // 0 = no limit
+  double smoothness = 0;                    // γ of the per-element smoothness term
+  std::vector<double> lcurve;               // γ values of an L-curve sweep (empty = none)
+  std::vector<std::string> experiments;     // further scenario files fitted jointly
+  int checkpoint_steps = 0;                 // IDAS steps between adjoint checkpoints; 0 = default
+  double segment = 0;                       // s per adjoint segment; 0 = a single segment
+};
+
 struct Scenario {
   std::string name;
   std::string path;  // the scenario file, for messages
@@ -70,6 +109,7 @@ struct Scenario {
   MarkersSpec markers;
   TimeSpec time;
   SolverSpec solver;
+  FitSpec fit;
 };
 
 /// Parses and validates a scenario. Throws kelvin::Error whose message begins

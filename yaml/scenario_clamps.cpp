@@ -255,7 +255,7 @@ MarkersSpec load_markers(const Doc& d, const Node& n, const Mesh& mesh) {
   if (const Node obs = n["observed"]) {
     const std::string OP = join(P, "observed");
     spec.observed_path = d.existing_file(obs, OP);
-    MarkerTracks tracks;
+    MarkerTracks& tracks = spec.observed;
     try {
       tracks = read_marker_tracks(spec.observed_path);
     } catch (const Error& e) {

@@ -1,0 +1,222 @@
+#include "adjoint/experiment.hpp"
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "adjoint/experiment_run.hpp"
+#include "engine/error.hpp"
+#include "engine/simulation.hpp"
+
+namespace kelvin {
+
+GradientMethod parse_gradient_method(const std::string& name) {
+  if (name == "adjoint") return GradientMethod::kAdjoint;
+  if (name == "forward") return GradientMethod::kForward;
+  if (name == "none") return GradientMethod::kNone;
+  throw Error(fmt::format("unknown gradient method '{}' (adjoint, forward or none)", name));
+}
+
+const char* to_string(GradientMethod m) {
+  switch (m) {
+    case GradientMethod::kAdjoint:
+      return "adjoint";
+    case GradientMethod::kForward:
+      return "forward";
+    default:
+      return "none";
+  }
+}
+
+namespace {
+MarkerObjective make_objective(const Scenario& s, const ObjectiveSpec& spec) {
+  if (s.markers.observed_path.empty())
+    throw Error(
+        fmt::format("{}: markers.observed: the scenario has no captured tracks to fit", s.path));
+  try {
+    return MarkerObjective(s.markers.embedded, s.markers.observed, spec, s.time.end);
+  } catch (const Error& e) {
+    throw Error(fmt::format("{}: {}", s.path, e.what()));
+  }
+}
+}  // namespace
+
+Experiment::Experiment(const Scenario& scenario, const ObjectiveSpec& objective)
+    : scenario_(scenario),
+      model_(build_model(scenario)),
+      objective_(make_objective(scenario, objective)) {}
+
+ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
+                                      const GradientOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  ExperimentResult result;
+  map.apply(p, *model_);
+  try {
+    ExperimentRun run(*this, map, p, options);
+    switch (options.method) {
+      case GradientMethod::kNone:
+        evaluate_objective(run, result);
+        break;
+      case GradientMethod::kForward:
+        evaluate_forward_sensitivities(run, result);
+        break;
+      case GradientMethod::kAdjoint:
+        evaluate_adjoint(run, result);
+        break;
+    }
+  } catch (const Error& e) {
+    // Inadmissible trial parameters (e.g. no static equilibrium) fail this evaluation only.
+    result.ok = false;
+    result.error = e.what();
+  }
+  if (result.phi_per_marker.size()) {
+    result.phi = result.phi_per_marker.sum();
+    result.rms = objective_.rms(result.phi_per_marker);
+  }
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::VectorXd& params,
+                             const GradientOptions& o)
+    : ex(e),
+      model(e.model()),
+      objective(e.objective()),
+      map(m),
+      p(params),
+      opt(o),
+      iopt(integrator_options(e.scenario().solver)),
+      deriv(e.model(), m.slots()),
+      dae(e.model()),
+      n(e.model().num_dofs()),
+      t_end(e.scenario().time.end) {
+  initial_state(ex.scenario(), model, x0, v0);
+}
+
+std::vector<double> ExperimentRun::boundaries() const {
+  std::vector<double> b{t0};
+  if (opt.segment > 0) {
+    const int segments =
+        std::max(1, static_cast<int>(std::ceil((t_end - t0) / opt.segment - 1e-9)));
+    for (int k = 1; k < segments; ++k) b.push_back(t0 + k * opt.segment);
+  }
+  b.push_back(t_end);
+  return b;
+}
+
+void ExperimentRun::expand(double t, const double* y, const double* yp) {
+  model.expand(t, y, y + n, x, v);
+  model.expand_acceleration(t, yp + n, a);
+}
+
+std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::VectorXd& x_free,
+                                                     const Eigen::VectorXd& v_free) {
+  auto integ = std::make_unique<IdasIntegrator>(model, iopt);
+  integ->initialize(t, x_free, v_free);
+  // Φ's integrand has kinks at capture frames and jumps where markers drop out;
+  // error control on the quadrature lets IDAS resolve them. Its absolute
+  // tolerance is the misfit of a marker off by the position tolerance.
+  const double atol = 0.5 * iopt.atol * iopt.atol * (t_end - t0);
+  integ->add_quadrature(
+      objective.num_markers(),
+      [this](double tt, const double* y, const double*, double* g) {
+        model.expand(tt, y, nullptr, x, v);
+        objective.integrand(tt, model, x, g);
+        return true;
+      },
+      false, atol);
+  return integ;
+}
+
+bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& result) {
+  // Chunks only so that an interrupt is noticed; the stop time stays t1, so the
+  // steps do not depend on the chunking.
+  const double chunk = std::max((t_end - t0) / 100, 1e-3);
+  for (double t = integ.time(); t < t1;) {
+    if (opt.interrupt && opt.interrupt->load()) {
+      result.error = fmt::format("interrupted at t = {:.6g} s", integ.time());
+      result.t_reached = integ.time();
+      return false;
+    }
+    t = std::min(t1, t + chunk);
+    if (!integ.advance_to(t, t1)) {
+      result.error = integ.error();
+      result.t_reached = integ.time();
+      return false;
+    }
+  }
+  result.t_reached = t1;
+  return true;
+}
+
+bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
+  B.setZero(n, map.size());
+  const auto& elements = model.elements();
+  return deriv.for_each(x, v, a, [&](int e, int s, const Vec12& dR) {
+    const int j = map.index(s, e);
+    if (j < 0) return;
+    const double dq = map.derivative(p, j);
+    for (int k = 0; k < 12; ++k)
+      if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0) B(d, j) += dq * dR[k];
+  });
+}
+
+bool ExperimentRun::contract(const double* lambda, double scale, Eigen::MatrixXd& out) {
+  const auto& elements = model.elements();
+  return deriv.for_each(x, v, a, [&](int e, int s, const Vec12& dR) {
+    double sum = 0;
+    for (int k = 0; k < 12; ++k)
+      if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0)
+        sum += lambda[d] * dR[k];
+    out(s, e) += scale * sum;
+  });
+}
+
+void ExperimentRun::factor_static_stiffness() {
+  Eigen::Matrix3Xd xs, vs;
+  model.expand(t0, x0.data(), v0.data(), xs, vs);
+  AssemblyOutput out;
+  if (!model.assemble(xs, vs, {true, true, false, false}, out))
+    throw Error(
+        fmt::format("the static initial state has an inverted element {}", out.failed_element));
+  K0.emplace();
+  K0->compute(to_sparse_matrix(model.pattern(), out.K));
+  if (K0->info() != Eigen::Success)
+    throw Error("the stiffness at the static initial state is singular");
+  // ∂R/∂q at the static state: no velocity, no acceleration.
+  x = xs;
+  v.setZero(3, xs.cols());
+  a.setZero(3, xs.cols());
+}
+
+void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
+  const double duration = t_end - t0;
+  adjoint_scale = std::max(objective.rms(phi_per_marker), iopt.atol) * duration;
+  double mass = 0;
+  for (int e = 0; e < model.mesh().num_tets(); ++e)
+    mass += model.density()[e] * model.elements()[e].volume;
+  const double node_mass = mass / model.mesh().num_nodes();
+  adjoint_velocity_ratio = duration / std::max(node_mass, 1e-300);
+}
+
+void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
+  // Segmented like the adjoint, so that Φ belongs to the same trajectory.
+  const std::vector<double> T = run.boundaries();
+  result.segments = static_cast<int>(T.size()) - 1;
+  Eigen::VectorXd xk = run.x0, vk = run.v0;
+  result.phi_per_marker.setZero(run.objective.num_markers());
+  for (size_t k = 0; k + 1 < T.size(); ++k) {
+    auto integ = run.start(T[k], xk, vk);
+    const bool ok = run.advance(*integ, T[k + 1], result);
+    result.phi_per_marker += integ->quadrature();
+    const IntegratorStats st = integ->stats();
+    result.forward_stats.steps += st.steps;
+    if (!ok) return;
+    xk = integ->positions();
+    vk = integ->velocities();
+  }
+  result.ok = true;
+}
+
+}  // namespace kelvin

@@ -1,0 +1,71 @@
+#pragma once
+/// \file
+/// One captured motion of the specimen (a scenario with observed marker tracks) and
+/// what a gradient evaluation needs of it: its model, its objective, the parameter
+/// derivatives of its residual, and the initial state with its sensitivity.
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <atomic>
+#include <memory>
+#include <string>
+
+#include "adjoint/marker_objective.hpp"
+#include "adjoint/parameter_map.hpp"
+#include "engine/fem_model.hpp"
+#include "engine/idas_integrator.hpp"
+#include "engine/param_derivatives.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+
+enum class GradientMethod { kNone, kForward, kAdjoint };
+GradientMethod parse_gradient_method(const std::string& name);  // adjoint | forward | none
+const char* to_string(GradientMethod m);
+
+struct GradientOptions {
+  GradientMethod method = GradientMethod::kAdjoint;
+  long checkpoint_steps = 0;  // IDAS steps between checkpoints; 0 = default
+  double segment = 0;         // simulated seconds per adjoint segment; 0 = one segment
+  const std::atomic<bool>* interrupt = nullptr;
+};
+
+/// Default checkpoint interval (steps), chosen by bench_gradient's sweep.
+constexpr long kDefaultCheckpointSteps = 100;
+
+struct ExperimentResult {
+  bool ok = false;
+  std::string error;  // why the simulation failed (names the time)
+  double t_reached = 0;
+  Eigen::VectorXd phi_per_marker;  // Φᵢ
+  double phi = 0, rms = 0;         // Σ Φᵢ and the RMS distance (m)
+  Eigen::VectorXd gradient;        // dΦ/dp (empty without a gradient)
+  Eigen::MatrixXd dphi_dq;         // adjoint only: dΦ/dq per slot × element
+  IntegratorStats forward_stats, backward_stats;
+  long backward_steps = 0;
+  int segments = 1;
+  double seconds = 0;
+};
+
+class Experiment {
+ public:
+  /// The scenario must outlive the experiment and have observed marker tracks.
+  Experiment(const Scenario& scenario, const ObjectiveSpec& objective);
+
+  const Scenario& scenario() const { return scenario_; }
+  FemModel& model() { return *model_; }
+  const FemModel& model() const { return *model_; }
+  const MarkerObjective& objective() const { return objective_; }
+
+  /// Φ and, on request, dΦ/dp at the map's parameters p (applied to the model
+  /// first). A failing simulation (inversion, solver failure) is reported in the
+  /// result, not thrown: a fitter backs off from such trial parameters.
+  ExperimentResult evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
+                            const GradientOptions& options);
+
+ private:
+  const Scenario& scenario_;
+  std::unique_ptr<FemModel> model_;
+  MarkerObjective objective_;
+};
+
+}  // namespace kelvin

@@ -1,0 +1,63 @@
+#pragma once
+/// \file
+/// Internal to the gradient methods: the state one evaluation of an experiment
+/// shares between the objective run, forward sensitivities and the adjoint.
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
+#include <optional>
+
+#include "adjoint/experiment.hpp"
+#include "engine/dae_system.hpp"
+
+namespace kelvin {
+
+struct ExperimentRun {
+  ExperimentRun(Experiment& ex, const ParameterMap& map, const Eigen::VectorXd& p,
+                const GradientOptions& opt);
+
+  Experiment& ex;
+  FemModel& model;
+  const MarkerObjective& objective;
+  const ParameterMap& map;
+  const Eigen::VectorXd& p;
+  const GradientOptions& opt;
+  IntegratorOptions iopt;
+  ParamDerivatives deriv;
+  DaeSystem dae;  // K, D and mass solves at arbitrary states
+  int n = 0;
+  double t0 = 0, t_end = 0;
+  Eigen::VectorXd x0, v0;
+  Eigen::Matrix3Xd x, v, a;  // full nodal fields of the last expand()
+
+  /// Segment boundaries t0 = T₀ < … < T_S = t_end.
+  std::vector<double> boundaries() const;
+
+  void expand(double t, const double* y, const double* yp);
+  /// A fresh integrator at (t, y) with the Φ quadrature attached: every forward
+  /// pass of an evaluation is built here, so that they take identical steps.
+  std::unique_ptr<IdasIntegrator> start(double t, const Eigen::VectorXd& x_free,
+                                        const Eigen::VectorXd& v_free);
+  /// Integrates to t1; false (with result.error, t_reached) on failure or interrupt.
+  bool advance(IdasIntegrator& integ, double t1, ExperimentResult& result);
+  /// ∂R/∂p_j over the free dofs for every entry j of p, at the current x, v, a.
+  bool param_vectors(Eigen::MatrixXd& B);
+  /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a.
+  bool contract(const double* lambda, double scale, Eigen::MatrixXd& out);
+
+  /// Magnitudes of λx and λv/λx for the backward absolute tolerances, from the
+  /// misfit: λx ~ ∫ ∂g/∂x dt ~ RMS · T, λv ~ λx · T / m (m a mean nodal mass).
+  double adjoint_scale = 0, adjoint_velocity_ratio = 1;
+  void set_adjoint_scale(const Eigen::VectorXd& phi_per_marker);
+
+  /// Sensitivity of a static initial state, x₀_p = −K₀⁻¹ ∂R/∂p (zero from rest).
+  bool static_initial() const { return ex.scenario().static_initial; }
+  void factor_static_stiffness();
+  std::optional<Eigen::SparseLU<Eigen::SparseMatrix<double>>> K0;
+};
+
+/// The methods, each filling `result` (Φ, gradient) for one experiment.
+void evaluate_objective(ExperimentRun& run, ExperimentResult& result);
+void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result);
+void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result);
+
+}  // namespace kelvin

@@ -1,0 +1,76 @@
+#include "adjoint/fit_problem.hpp"
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <filesystem>
+
+#include "engine/error.hpp"
+#include "materials/material.hpp"
+
+namespace kelvin {
+
+std::vector<FitParameterSpec> default_fit_parameters(const Scenario& s) {
+  std::vector<FitParameterSpec> out;
+  auto add_term = [&](const MaterialTermSpec& term, const std::string& prefix) {
+    const auto model = create_material(term.model, term.plugin);
+    for (const auto& info : model->params()) {
+      FitParameterSpec spec;
+      spec.target = prefix + "." + info.name;
+      spec.lower = info.lower;
+      spec.upper = info.upper;
+      spec.log = info.positive;
+      // Parameters at zero (e.g. an unused Rayleigh coefficient) cannot start a log fit.
+      const double value = term.params.at(info.name);
+      if (spec.log && !(value > 0)) continue;
+      out.push_back(spec);
+    }
+  };
+  add_term(s.material.elastic, "elastic");
+  if (s.material.viscous) add_term(*s.material.viscous, "viscous");
+  return out;
+}
+
+FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs) {
+  if (specs.empty()) specs = default_fit_parameters(scenario);
+  experiments_.push_back(std::make_unique<Experiment>(scenario, scenario.fit.objective));
+  const auto dir = std::filesystem::path(scenario.path).parent_path();
+  for (const auto& file : scenario.fit.experiments) {
+    owned_.push_back(std::make_unique<Scenario>(load_scenario((dir / file).string())));
+    const Scenario& other = *owned_.back();
+    if (other.mesh.num_tets() != scenario.mesh.num_tets() ||
+        other.mesh.num_nodes() != scenario.mesh.num_nodes())
+      throw Error(fmt::format(
+          "{}: fit.experiments: {} has a different mesh ({} tets) than {} ({} tets); the "
+          "experiments of one fit share the specimen's mesh",
+          scenario.path, other.path, other.mesh.num_tets(), scenario.path,
+          scenario.mesh.num_tets()));
+    experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
+  }
+  map_ = std::make_unique<ParameterMap>(specs, scenario, experiments_[0]->model());
+}
+
+Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  Evaluation ev;
+  ev.ok = true;
+  double weighted_time = 0;
+  if (options.method != GradientMethod::kNone) ev.gradient.setZero(map_->size());
+  for (auto& ex : experiments_) {
+    ExperimentResult r = ex->evaluate(*map_, p, options);
+    if (!r.ok && ev.ok) {
+      ev.ok = false;
+      ev.error = fmt::format("{}: {}", ex->scenario().path, r.error);
+    }
+    ev.phi += r.phi;
+    for (int i = 0; i < ex->objective().num_markers(); ++i)
+      weighted_time += ex->objective().weighted_observed_time(i);
+    if (r.ok && r.gradient.size()) ev.gradient += r.gradient;
+    ev.experiments.push_back(std::move(r));
+  }
+  ev.rms = std::sqrt(2 * ev.phi / weighted_time);
+  ev.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return ev;
+}
+
+}  // namespace kelvin

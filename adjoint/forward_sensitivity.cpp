@@ -1,0 +1,127 @@
+// Forward sensitivities with IDAS FSA (staggered corrector, analytic residual):
+//   s_x' − s_v = 0,   M s_v' + K s_x + D s_v + ∂R/∂p_j = 0,
+// with dΦ/dp_j = ∫ ∂g/∂x · s_x,j dt as a quadrature sensitivity. One linear system
+// per parameter per step: the cost grows with the number of parameters, which is
+// what the adjoint avoids.
+#include <cstring>
+
+#include "adjoint/experiment_run.hpp"
+#include "engine/error.hpp"
+
+namespace kelvin {
+namespace {
+
+/// K, D and ∂R/∂p at the last (t, y, y') they were computed for: IDAS evaluates
+/// the sensitivity residual several times per step at the same state.
+struct StateCache {
+  double t = NAN;
+  Eigen::VectorXd y, yp;
+  bool matches(double tt, const double* yy, const double* yyp, int size) const {
+    return tt == t && y.size() == size && std::memcmp(y.data(), yy, sizeof(double) * size) == 0 &&
+           std::memcmp(yp.data(), yyp, sizeof(double) * size) == 0;
+  }
+  void store(double tt, const double* yy, const double* yyp, int size) {
+    t = tt;
+    y = Eigen::Map<const Eigen::VectorXd>(yy, size);
+    yp = Eigen::Map<const Eigen::VectorXd>(yyp, size);
+  }
+};
+
+/// y += A x for values A in the FEM pattern.
+void pattern_multiply(const SparsePattern& P, const std::vector<double>& A, const double* x,
+                      double* y) {
+  for (int c = 0; c < P.n; ++c)
+    for (int k = P.colptr[c]; k < P.colptr[c + 1]; ++k) y[P.rowind[k]] += A[k] * x[c];
+}
+
+}  // namespace
+
+void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result) {
+  const int n = run.n, np = run.map.size();
+  FemModel& model = run.model;
+  const SparsePattern& P = model.pattern();
+
+  // Initial sensitivities: x₀_p from the static state (zero from rest), v₀_p = 0,
+  // and consistent derivatives s_v' = −M⁻¹(K s_x + D s_v + ∂R/∂p) at t₀.
+  Eigen::MatrixXd yS0 = Eigen::MatrixXd::Zero(2 * n, np), ypS0 = Eigen::MatrixXd::Zero(2 * n, np);
+  Eigen::MatrixXd B;
+  if (run.static_initial()) {
+    run.factor_static_stiffness();
+    if (!run.param_vectors(B)) throw Error("an element is inadmissible at the static state");
+    for (int j = 0; j < np; ++j) yS0.col(j).head(n) = -run.K0->solve(B.col(j));
+  }
+  auto integ = run.start(run.t0, run.x0, run.v0);
+  {
+    Eigen::VectorXd y(2 * n), yp(2 * n);
+    y << run.x0, run.v0;
+    if (!run.dae.consistent_derivative(run.t0, y.data(), yp.data()) ||
+        !run.dae.stiffness_and_damping(run.t0, y.data()))
+      throw Error("the initial state is inadmissible");
+    run.expand(run.t0, y.data(), yp.data());
+    if (!run.param_vectors(B)) throw Error("an element is inadmissible at the initial state");
+    const AssemblyOutput& out = run.dae.last_assembly();
+    for (int j = 0; j < np; ++j) {
+      Eigen::VectorXd rhs = -B.col(j);
+      Eigen::VectorXd Ks = Eigen::VectorXd::Zero(n);
+      pattern_multiply(P, out.K, yS0.col(j).data(), Ks.data());
+      rhs -= Ks;
+      run.dae.mass_solve(rhs.data(), ypS0.col(j).data() + n);
+    }
+  }
+
+  // Sensitivity error weights scale with the parameter: dy/d(ln q) has the units
+  // of y; dy/dq is measured per typical q.
+  Eigen::VectorXd pbar(np);
+  for (const auto& b : run.map.blocks())
+    for (int j = b.offset; j < b.offset + b.count; ++j)
+      pbar[j] = b.log ? 1.0 : std::max(std::abs(run.p[j]), 1e-300);
+
+  auto cache = std::make_shared<StateCache>();
+  auto params = std::make_shared<Eigen::MatrixXd>();
+  integ->add_sensitivities(
+      [&run, cache, params, n, &P](double t, const double* y, const double* yp, int ns,
+                                   const double* const* yS, const double* const* ypS,
+                                   double* const* resS) {
+        if (!cache->matches(t, y, yp, 2 * n)) {
+          if (!run.dae.stiffness_and_damping(t, y)) return false;
+          run.expand(t, y, yp);
+          if (!run.param_vectors(*params)) return false;
+          cache->store(t, y, yp, 2 * n);
+        }
+        const AssemblyOutput& out = run.dae.last_assembly();
+        for (int j = 0; j < ns; ++j) {
+          double* r = resS[j];
+          for (int i = 0; i < n; ++i) r[i] = ypS[j][i] - yS[j][n + i];
+          Eigen::Map<Eigen::VectorXd> rv(r + n, n);
+          rv = params->col(j);
+          run.model.mass_multiply(ypS[j] + n, r + n);
+          pattern_multiply(P, out.K, yS[j], r + n);
+          pattern_multiply(P, out.D, yS[j] + n, r + n);
+        }
+        return true;
+      },
+      yS0, ypS0, pbar);
+  integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,
+                                                const double* const* yS, double* const* qS) {
+    Eigen::Matrix3Xd x, v;
+    run.model.expand(t, y, nullptr, x, v);
+    Eigen::VectorXd grad = Eigen::VectorXd::Zero(n);
+    run.objective.add_gradient(t, run.model, x, grad.data());
+    const int nq = run.objective.num_markers();
+    for (int j = 0; j < ns; ++j) {
+      // Only the sum over markers is needed: it is carried in component 0.
+      std::fill(qS[j], qS[j] + nq, 0.0);
+      qS[j][0] = grad.dot(Eigen::Map<const Eigen::VectorXd>(yS[j], n));
+    }
+    return true;
+  });
+
+  const bool ok = run.advance(*integ, run.t_end, result);
+  result.phi_per_marker = integ->quadrature();
+  result.forward_stats = integ->stats();
+  if (!ok) return;
+  result.gradient = integ->quadrature_sensitivities().colwise().sum().transpose();
+  result.ok = true;
+}
+
+}  // namespace kelvin

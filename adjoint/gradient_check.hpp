@@ -1,0 +1,41 @@
+#pragma once
+/// \file
+/// Three-way check of dΦ/dp: adjoint, forward sensitivities and central finite
+/// differences, plus a Taylor test along a random direction δ:
+///   r(h) = |Φ(p + hδ) − Φ(p) − h ∇Φ·δ| = O(h²),
+/// whose log–log slope must be ≈ 2 when the gradient is right (≈ 1 when it is not).
+#include <Eigen/Core>
+#include <vector>
+
+#include "adjoint/fit_problem.hpp"
+
+namespace kelvin {
+
+struct GradientCheckOptions {
+  unsigned seed = 1;
+  double fd_step = 1e-3;     // central-difference step in p (relative for log entries)
+  int max_parameters = 12;   // per-parameter differences only for this many entries
+  bool forward = true;       // also run forward sensitivities
+  double taylor_h0 = 0.125;  // first Taylor step; halved taylor_levels − 1 times
+  int taylor_levels = 6;
+  GradientOptions adjoint;  // method is forced to adjoint
+};
+
+struct GradientCheckReport {
+  bool ok = false;
+  std::string error;
+  double phi = 0, rms = 0;
+  Eigen::VectorXd adjoint, forward, finite_difference;  // forward/fd may be empty
+  std::vector<int> checked;                             // entries with finite differences
+  Eigen::VectorXd direction;
+  double directional_adjoint = 0, directional_forward = 0, directional_fd = 0;
+  std::vector<double> h, remainder;
+  double slope = 0;
+  double adjoint_vs_forward = 0, adjoint_vs_fd = 0;  // relative errors (∞-norms)
+  double seconds_forward_only = 0, seconds_adjoint = 0, seconds_forward_sensitivities = 0;
+};
+
+GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p,
+                                   const GradientCheckOptions& options);
+
+}  // namespace kelvin

@@ -1,0 +1,128 @@
+// `kelvin gradcheck`: adjoint vs forward sensitivities vs finite differences, and a
+// Taylor test, for the parameter map of a scenario's fit section.
+#include <fmt/format.h>
+
+#include "adjoint/gradient_check.hpp"
+#include "drivers/commands.hpp"
+#include "engine/error.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+
+void register_gradcheck(CLI::App& app, int& exit_code) {
+  struct Args {
+    std::string scenario;
+    double end = 0, rtol = 1e-8, atol = 1e-12, tolerance = 1e-5, fd_tolerance = 1e-3;
+    double segment = 0;
+    long checkpoint_steps = 0;
+    unsigned seed = 1;
+    bool no_forward = false;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "gradcheck",
+      "Check dΦ/dp three ways (adjoint, forward sensitivities, central finite differences) "
+      "and by a Taylor test along a random direction, for the parameters of the scenario's fit "
+      "section (or every material parameter, global). Exits 2 when they disagree.");
+  cmd->add_option("scenario", args->scenario, "scenario YAML file with observed marker tracks")
+      ->required();
+  cmd->add_option("--end", args->end, "simulate up to this time (s) instead of time.end")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--rtol", args->rtol, "IDAS relative tolerance for the check")
+      ->capture_default_str();
+  cmd->add_option("--atol", args->atol, "IDAS absolute position tolerance (m)")
+      ->capture_default_str();
+  cmd->add_option("--tolerance", args->tolerance, "allowed adjoint vs forward relative error")
+      ->capture_default_str();
+  cmd->add_option("--fd-tolerance", args->fd_tolerance,
+                  "allowed adjoint vs finite-difference relative error")
+      ->capture_default_str();
+  cmd->add_option("--segment", args->segment, "adjoint segment length (s); 0 = one segment");
+  cmd->add_option("--checkpoint-steps", args->checkpoint_steps, "IDAS steps between checkpoints");
+  cmd->add_option("--seed", args->seed, "seed of the random direction")->capture_default_str();
+  cmd->add_flag("--no-forward", args->no_forward,
+                "skip forward sensitivities (their cost grows with the parameter count)");
+  cmd->callback([args, &exit_code] {
+    Scenario scenario;
+    std::unique_ptr<FitProblem> problem;
+    try {
+      scenario = load_scenario(args->scenario);
+      if (args->end > 0) scenario.time.end = std::min(scenario.time.end, args->end);
+      scenario.solver.rtol = args->rtol;
+      scenario.solver.atol = args->atol;
+      problem = std::make_unique<FitProblem>(scenario, scenario.fit.parameters);
+    } catch (const Error& e) {
+      fmt::print(stderr, "error: {}\n", e.what());
+      exit_code = kExitInputError;
+      return;
+    }
+    const ParameterMap& map = problem->map();
+    GradientCheckOptions o;
+    o.seed = args->seed;
+    o.forward = !args->no_forward;
+    o.adjoint.segment = args->segment;
+    o.adjoint.checkpoint_steps = args->checkpoint_steps;
+    o.adjoint.interrupt = &g_interrupted;
+    const Eigen::VectorXd p = map.initial();
+    fmt::print(
+        "kelvin gradcheck: {} — {} parameters, {} experiment(s), t ∈ [0, {:g}] s, rtol {:g}\n",
+        scenario.name, map.size(), problem->num_experiments(), scenario.time.end, args->rtol);
+    const GradientCheckReport r = check_gradient(*problem, p, o);
+    if (!r.ok) {
+      fmt::print(stderr, "error: {}\n", r.error);
+      exit_code = g_interrupted ? kExitInterrupted : kExitRunFailed;
+      return;
+    }
+    fmt::print("Φ = {:.10g} m²s, RMS = {:.4g} mm\n", r.phi, 1e3 * r.rms);
+    fmt::print("{:<32} {:>10} {:>16} {:>16} {:>16} {:>10} {:>10}\n", "parameter", "value",
+               "adjoint", "forward", "central FD", "adj/fwd", "adj/FD");
+    for (int j = 0; j < map.size(); ++j) {
+      const bool has_fd = j < static_cast<int>(r.finite_difference.size());
+      if (!has_fd && j >= 12) {
+        fmt::print("… {} more parameters (directional check below covers them)\n", map.size() - j);
+        break;
+      }
+      const double a = r.adjoint[j];
+      auto rel = [&](double b) {
+        return std::abs(a - b) / std::max({std::abs(a), std::abs(b), 1e-300});
+      };
+      fmt::print("{:<32} {:>10.4g} {:>16.9g} {:>16} {:>16} {:>10} {:>10}\n", map.label(j),
+                 map.value(p, j), a, r.forward.size() ? fmt::format("{:.9g}", r.forward[j]) : "-",
+                 has_fd ? fmt::format("{:.9g}", r.finite_difference[j]) : "-",
+                 r.forward.size() ? fmt::format("{:.1e}", rel(r.forward[j])) : "-",
+                 has_fd ? fmt::format("{:.1e}", rel(r.finite_difference[j])) : "-");
+    }
+    fmt::print("direction δ (seed {}): adjoint {:.9g}, forward {}, central FD {:.9g}\n", args->seed,
+               r.directional_adjoint,
+               r.forward.size() ? fmt::format("{:.9g}", r.directional_forward) : "-",
+               r.directional_fd);
+    fmt::print("Taylor test |Φ(p+hδ) − Φ(p) − h∇Φ·δ|:\n");
+    for (size_t k = 0; k < r.h.size(); ++k)
+      fmt::print("  h = 2^{:<3.0f} remainder {:.4e}\n", std::log2(r.h[k]), r.remainder[k]);
+    fmt::print("fitted slope {:.3f} (2 for an exact gradient)\n", r.slope);
+    fmt::print(
+        "wall time: Φ alone {:.3g} s, Φ + adjoint gradient {:.3g} s ({:.2f}×){}\n",
+        r.seconds_forward_only, r.seconds_adjoint, r.seconds_adjoint / r.seconds_forward_only,
+        r.forward.size() ? fmt::format(", forward sensitivities {:.3g} s ({:.2f}×)",
+                                       r.seconds_forward_sensitivities,
+                                       r.seconds_forward_sensitivities / r.seconds_forward_only)
+                         : "");
+    std::vector<std::string> failures;
+    if (r.forward.size() && !(r.adjoint_vs_forward <= args->tolerance))
+      failures.push_back(fmt::format("adjoint and forward differ by {:.2e} > {:.1e}",
+                                     r.adjoint_vs_forward, args->tolerance));
+    if (!(r.adjoint_vs_fd <= args->fd_tolerance))
+      failures.push_back(fmt::format("adjoint and finite differences differ by {:.2e} > {:.1e}",
+                                     r.adjoint_vs_fd, args->fd_tolerance));
+    if (!(r.slope >= 1.8 && r.slope <= 2.2))
+      failures.push_back(fmt::format("Taylor slope {:.3f} is not 2", r.slope));
+    if (failures.empty()) {
+      fmt::print("PASS: the gradient methods agree\n");
+    } else {
+      for (const auto& f : failures) fmt::print("FAIL: {}\n", f);
+      exit_code = kExitRunFailed;
+    }
+  });
+}
+
+}  // namespace kelvin
