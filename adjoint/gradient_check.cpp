@@ -62,7 +62,9 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     rep.finite_difference.resize(checked);
     for (int j = 0; j < checked; ++j) {
       Eigen::VectorXd qp = p, qm = p;
-      const double h = o.fd_step * std::max(1.0, std::abs(p[j]));
+      // Log entries are relative already; linear ones get a step relative to their value.
+      const double h =
+          o.fd_step * (problem.map().is_log(j) ? 1.0 : std::max(std::abs(p[j]), 1e-12));
       qp[j] += h;
       qm[j] -= h;
       rep.finite_difference[j] = (phi(qp) - phi(qm)) / (2 * h);
@@ -76,8 +78,7 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     // Scale so that a unit step changes each entry by about its own size (log
     // entries: a factor e), keeping the Taylor steps meaningful in every unit.
     for (int j = 0; j < np; ++j)
-      rep.direction[j] *=
-          problem.map().derivative(p, j) == 1.0 ? std::max(std::abs(p[j]), 1e-12) : 1.0;
+      rep.direction[j] *= problem.map().is_log(j) ? 1.0 : std::max(std::abs(p[j]), 1e-12);
     rep.direction /= std::sqrt(static_cast<double>(np));
     rep.directional_adjoint = rep.adjoint.dot(rep.direction);
     if (o.forward) rep.directional_forward = rep.forward.dot(rep.direction);

@@ -13,10 +13,10 @@ namespace kelvin {
 
 struct GradientCheckOptions {
   unsigned seed = 1;
-  double fd_step = 1e-3;     // central-difference step in p (relative for log entries)
-  int max_parameters = 12;   // per-parameter differences only for this many entries
-  bool forward = true;       // also run forward sensitivities
-  double taylor_h0 = 0.125;  // first Taylor step; halved taylor_levels − 1 times
+  double fd_step = 1e-3;        // central-difference step in p (relative for log entries)
+  int max_parameters = 12;      // per-parameter differences only for this many entries
+  bool forward = true;          // also run forward sensitivities
+  double taylor_h0 = 1.0 / 32;  // first Taylor step; halved taylor_levels − 1 times
   int taylor_levels = 6;
   GradientOptions adjoint;  // method is forced to adjoint
 };

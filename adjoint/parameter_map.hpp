@@ -46,6 +46,7 @@ class ParameterMap {
   Eigen::VectorXd upper() const;
   /// Model value of entry j of p.
   double value(const Eigen::VectorXd& p, int j) const;
+  bool is_log(int j) const { return blocks_[block_of_[j]].log; }
   /// dq/dp of entry j (q for log blocks, 1 otherwise).
   double derivative(const Eigen::VectorXd& p, int j) const;
 

@@ -1,0 +1,204 @@
+// Gradients of the marker misfit: adjoint vs forward sensitivities vs central
+// finite differences, Taylor tests, the occlusion rule and segment-wise adjoints.
+// Observed tracks are simulated by kelvin with known parameters; the fits start
+// away from them so that the misfit and its gradient are far from zero.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "adjoint/fit_problem.hpp"
+#include "adjoint/gradient_check.hpp"
+#include "engine/simulation.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A 60 × 20 × 20 mm bar (144 tets) clamped at x = 0, shaken along y and z, hanging
+/// under gravity from a static initial state; two markers.
+std::string bar_yaml(const std::string& material, const std::string& extra = "") {
+  return R"(
+name: bar
+mesh: { generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }
+material:
+)" + material +
+         R"(
+gravity: [0, 0, -9.81]
+initial: static
+clamps:
+  - name: base
+    select: { plane: { axis: x, at: 0 } }
+    motion:
+      sinusoids:
+        translation:
+          - { amplitude: 0.003, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }
+          - { amplitude: 0.002, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }
+time: { end: 0.1, output_rate: 200 }
+solver: { rtol: 1.0e-9, atol: 1.0e-13 }
+)" + extra;
+}
+
+const std::string kMarkers = R"(
+markers:
+  rest:
+    - { name: tip, at: [0.06, 0.01, 0.01] }
+    - { name: mid, at: [0.03, 0.01, 0.02] }
+)";
+
+const std::string kTruthNeoHookean = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: power-law, nu: 20, h: 0.8 })";
+const std::string kStartNeoHookean = R"(
+  density: 1300
+  elastic: { model: neo-hookean, lambda: 2.6e5, mu: 0.8e5 }
+  viscous: { model: power-law, nu: 30, h: 0.9 })";
+const std::string kTruthRayleigh = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: rayleigh, alpha0: 2.0, alpha1: 1.0e-3 })";
+const std::string kStartRayleigh = R"(
+  density: 1000
+  elastic: { model: neo-hookean, lambda: 2.4e5, mu: 1.2e5 }
+  viscous: { model: rayleigh, alpha0: 3.0, alpha1: 0.7e-3 })";
+
+fs::path scratch(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("kelvin-gradients-" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+void write(const fs::path& path, const std::string& text) {
+  std::ofstream(path) << text;
+}
+
+/// Simulates the truth and returns the path of its marker tracks.
+std::string simulate_truth(const fs::path& dir, const std::string& material) {
+  write(dir / "truth.yaml", bar_yaml(material, kMarkers));
+  SimulationOptions o;
+  o.outdir = (dir / "truth").string();
+  const SimulationResult r = run_simulation(load_scenario((dir / "truth.yaml").string()), o);
+  EXPECT_TRUE(r.completed) << r.error;
+  return (dir / "truth" / "markers.csv").string();
+}
+
+Scenario fit_scenario(const fs::path& dir, const std::string& material, const std::string& tracks) {
+  const std::string markers =
+      kMarkers.substr(0, kMarkers.rfind('\n')) + "\n  observed: " + tracks + "\n";
+  write(dir / "fit.yaml", bar_yaml(material, markers));
+  return load_scenario((dir / "fit.yaml").string());
+}
+
+FitParameterSpec param(const std::string& target,
+                       FitParameterSpec::Scope scope = FitParameterSpec::Scope::Global) {
+  FitParameterSpec s;
+  s.target = target;
+  s.scope = scope;
+  s.lower = 0;
+  s.upper = 1e300;
+  s.log = true;
+  return s;
+}
+
+void expect_methods_agree(const GradientCheckReport& r) {
+  ASSERT_TRUE(r.ok) << r.error;
+  EXPECT_LT(r.adjoint_vs_forward, 1e-6) << "adjoint\n" << r.adjoint << "\nforward\n" << r.forward;
+  EXPECT_LT(r.adjoint_vs_fd, 1e-4) << "adjoint\n" << r.adjoint << "\nFD\n" << r.finite_difference;
+  EXPECT_GE(r.slope, 1.9);
+  EXPECT_LE(r.slope, 2.1);
+}
+
+TEST(Gradients, GlobalNeoHookeanPowerLawAndDensity) {
+  const fs::path dir = scratch("global");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  FitProblem problem(s, {param("elastic.lambda"), param("elastic.mu"), param("viscous.nu"),
+                         param("viscous.h"), param("density")});
+  ASSERT_EQ(problem.map().size(), 5);
+  const GradientCheckReport r = check_gradient(problem, problem.map().initial(), {});
+  expect_methods_agree(r);
+  EXPECT_GT(r.rms, 1e-4);  // the start is far from the truth: the gradient is not noise
+}
+
+TEST(Gradients, RayleighPerRegionWithDensity) {
+  const fs::path dir = scratch("rayleigh");
+  const Scenario s = fit_scenario(dir, kStartRayleigh, simulate_truth(dir, kTruthRayleigh));
+  auto halves = param("elastic.mu", FitParameterSpec::Scope::Boxes);
+  halves.boxes = {{Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(0.03, 1, 1)}};  // + the rest
+  auto density = param("density", FitParameterSpec::Scope::Boxes);
+  density.boxes = halves.boxes;
+  FitProblem problem(s, {halves, param("elastic.lambda"), param("viscous.alpha0"),
+                         param("viscous.alpha1"), density});
+  ASSERT_EQ(problem.map().size(), 7);
+  expect_methods_agree(check_gradient(problem, problem.map().initial(), {}));
+}
+
+TEST(Gradients, PerElementFieldAdjointMatchesForwardSensitivities) {
+  const fs::path dir = scratch("element");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  FitProblem problem(s, {param("elastic.mu", FitParameterSpec::Scope::PerElement)});
+  ASSERT_EQ(problem.map().size(), s.mesh.num_tets());
+  GradientCheckOptions o;
+  o.max_parameters = 4;  // finite differences on a few entries; δ covers all of them
+  expect_methods_agree(check_gradient(problem, problem.map().initial(), o));
+}
+
+TEST(Gradients, SegmentedAdjointMatchesSingleSegment) {
+  const fs::path dir = scratch("segments");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  FitProblem problem(s, {param("elastic.lambda"), param("elastic.mu"), param("viscous.nu")});
+  const Eigen::VectorXd p = problem.map().initial();
+  GradientOptions single, segmented;
+  segmented.segment = 0.025;  // four segments
+  const Evaluation a = problem.evaluate(p, single), b = problem.evaluate(p, segmented);
+  ASSERT_TRUE(a.ok && b.ok) << a.error << b.error;
+  EXPECT_EQ(b.experiments[0].segments, 4);
+  EXPECT_LT((a.gradient - b.gradient).norm() / a.gradient.norm(), 1e-8)
+      << a.gradient.transpose() << "\n"
+      << b.gradient.transpose();
+  EXPECT_NEAR(a.phi, b.phi, 1e-8 * a.phi);
+}
+
+TEST(Gradients, OccludedMarkerDropsExactlyItsIntervals) {
+  // Φ with the tip hidden in frames 5..9 equals Φ with full tracks minus the tip's
+  // misfit over [t₄, t₁₀] — the intervals that touch a hidden frame.
+  const fs::path dir = scratch("occlusion");
+  const std::string tracks = simulate_truth(dir, kTruthNeoHookean);
+  std::ifstream in(tracks);
+  std::string line, occluded;
+  for (int row = -1; std::getline(in, line); ++row) {
+    if (row >= 5 && row <= 9) {
+      // columns: t, tip_x, tip_y, tip_z, mid_...: blank the tip
+      const auto c1 = line.find(',');
+      std::string rest = line.substr(c1 + 1);
+      for (int k = 0; k < 3; ++k) rest = rest.substr(rest.find(',') + 1);
+      line = line.substr(0, c1) + ",,,," + rest;
+    }
+    occluded += line + "\n";
+  }
+  write(dir / "occluded.csv", occluded);
+  const Scenario full = fit_scenario(dir, kStartNeoHookean, tracks);
+  const double dt = 1.0 / 200;
+  GradientOptions none;
+  none.method = GradientMethod::kNone;
+  auto phi = [&](const Scenario& s, const ObjectiveSpec& spec) {
+    FitProblem problem(s, {param("elastic.mu")});
+    ExperimentResult r = Experiment(s, spec).evaluate(problem.map(), problem.map().initial(), none);
+    EXPECT_TRUE(r.ok) << r.error;
+    return r.phi;
+  };
+  ObjectiveSpec all, tip_window;
+  tip_window.weights["mid"] = 0;
+  tip_window.window_begin = 4 * dt;
+  tip_window.window_end = 10 * dt;
+  const Scenario hidden = fit_scenario(dir, kStartNeoHookean, (dir / "occluded.csv").string());
+  const double expected = phi(full, all) - phi(full, tip_window);
+  EXPECT_NEAR(phi(hidden, all), expected, 1e-6 * expected);
+  EXPECT_GT(phi(full, tip_window), 1e-3 * expected);  // the hidden part matters
+}
+
+}  // namespace
+}  // namespace kelvin
