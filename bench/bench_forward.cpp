@@ -12,37 +12,18 @@
 #include <string>
 #include <vector>
 
-#include "engine/selection.hpp"
+#include "bench/foam_cylinder.hpp"
 #include "engine/simulation.hpp"
 #include "yaml/scenario.hpp"
 
 using namespace kelvin;
+using kelvin::bench::remeshed;
 
 namespace {
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
-
-/// The example scenario re-meshed at element size h (clamps and markers re-resolved).
-Scenario remeshed(const Scenario& base, double h) {
-  Scenario s = base;
-  s.mesh = generate_cylinder(0.01, 0.2, h, 2);
-  for (auto& c : s.clamps) c.nodes = select_nodes(s.mesh, c.selection);
-  std::vector<std::string> names;
-  Eigen::Matrix3Xd rest(3, base.markers.embedded.size());
-  for (size_t i = 0; i < base.markers.embedded.size(); ++i) {
-    const auto& m = base.markers.embedded[i];
-    names.push_back(m.name);
-    rest.col(i).setZero();
-    for (int a = 0; a < 4; ++a)
-      rest.col(i) += m.weights[a] * base.mesh.nodes.col(base.mesh.tets(a, m.tet));
-  }
-  s.markers.embedded = embed_markers(s.mesh, names, rest, 1e-3);
-  s.time.end = 1.0;
-  s.time.vtu_rate = 0;
-  return s;
 }
 
 }  // namespace

@@ -1,0 +1,207 @@
+// Cost and memory of gradients on the bundled foam cylinder, with observed tracks
+// simulated from the example's parameters and a start 30% off.
+//
+// Cost: wall time of Φ + adjoint gradient over Φ alone, for 4 global parameters,
+// ~100 region parameters (slabs along the axis) and one parameter per element;
+// forward sensitivities for comparison (their cost grows with the count).
+// Memory: peak resident memory of one evaluation (each in a forked child, so the
+// peaks do not mix) for 1×, 10×, 100× the base duration: Φ alone, the adjoint with
+// one IDAS checkpointed segment, and the segment-wise adjoint.
+//
+//   build/bin/bench_gradient [--h 0.01] [--duration 0.1] [--repeat 3]
+//                            [--regions 100] [--memory-base 0.05] [--segment 0.05]
+//                            [--skip-cost] [--skip-memory]
+#include <fmt/format.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "adjoint/fit_problem.hpp"
+#include "bench/foam_cylinder.hpp"
+#include "engine/error.hpp"
+#include "engine/simulation.hpp"
+
+using namespace kelvin;
+
+namespace {
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+FitParameterSpec spec(const std::string& target, FitParameterSpec::Scope scope) {
+  FitParameterSpec s;
+  s.target = target;
+  s.scope = scope;
+  s.lower = 0;
+  s.upper = 1e300;
+  s.log = true;
+  return s;
+}
+
+/// The scenario at element size h and duration T with tracks from the truth.
+Scenario with_observations(double h, double T, const std::string& dir) {
+  Scenario truth = bench::remeshed(
+      load_scenario(std::string(KELVIN_SOURCE_DIR) + "/yaml/examples/foam-cylinder.yaml"), h);
+  truth.time.end = T;
+  truth.time.output_rate = 180;
+  SimulationOptions o;
+  o.outdir = dir;
+  const SimulationResult r = run_simulation(truth, o);
+  if (!r.completed) throw Error("truth simulation failed: " + r.error);
+  Scenario s = truth;
+  s.path = dir + "/scenario.yaml";
+  s.markers.observed_path = dir + "/markers.csv";
+  s.markers.observed = read_marker_tracks(s.markers.observed_path);
+  s.material.elastic.params["mu"] *= 1.3;
+  s.material.elastic.params["lambda"] *= 0.7;
+  s.material.viscous->params["nu"] *= 1.3;
+  return s;
+}
+
+struct Timing {
+  double seconds;
+  long steps, backward_steps;
+};
+
+Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat) {
+  GradientOptions o;
+  o.method = method;
+  std::vector<double> t;
+  Evaluation e;
+  for (int k = 0; k < repeat; ++k) {
+    e = problem.evaluate(problem.map().initial(), o);
+    if (!e.ok) throw Error(e.error);
+    t.push_back(e.seconds);
+  }
+  return {median(t), e.experiments[0].forward_stats.steps, e.experiments[0].backward_steps};
+}
+
+/// Peak resident memory (MiB) of one evaluation run in a child process.
+double peak_memory(const Scenario& s, const std::vector<FitParameterSpec>& specs, GradientOptions o,
+                   long* steps) {
+  int pipefd[2];
+  if (pipe(pipefd) != 0) throw Error("pipe failed");
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(pipefd[0]);
+    FitProblem problem(s, specs);
+    const Evaluation e = problem.evaluate(problem.map().initial(), o);
+    const long n = e.ok ? e.experiments[0].forward_stats.steps : -1;
+    if (write(pipefd[1], &n, sizeof n) != sizeof n) _exit(2);
+    _exit(e.ok ? 0 : 1);
+  }
+  close(pipefd[1]);
+  if (read(pipefd[0], steps, sizeof *steps) != sizeof *steps) *steps = -1;
+  close(pipefd[0]);
+  int status = 0;
+  rusage ru{};
+  wait4(pid, &status, 0, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  double h = 0.01, duration = 0.1, memory_base = 0.05, segment = 0.05;
+  int repeat = 3, regions = 100;
+  bool cost = true, memory = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&] { return std::stod(argv[++i]); };
+    if (a == "--h")
+      h = next();
+    else if (a == "--duration")
+      duration = next();
+    else if (a == "--repeat")
+      repeat = static_cast<int>(next());
+    else if (a == "--regions")
+      regions = static_cast<int>(next());
+    else if (a == "--memory-base")
+      memory_base = next();
+    else if (a == "--segment")
+      segment = next();
+    else if (a == "--skip-cost")
+      cost = false;
+    else if (a == "--skip-memory")
+      memory = false;
+    else {
+      fmt::print(stderr, "unknown option {}\n", a);
+      return 1;
+    }
+  }
+  const std::string dir =
+      (std::filesystem::temp_directory_path() / "kelvin-bench-gradient").string();
+  std::filesystem::create_directories(dir);
+  using Scope = FitParameterSpec::Scope;
+
+  if (cost) {
+    const Scenario s = with_observations(h, duration, dir + "/cost");
+    fmt::print("foam cylinder, h = {} mm: {} tets, {} dofs, {} s simulated, medians of {}\n",
+               1e3 * h, s.mesh.num_tets(), 3 * s.mesh.num_nodes(), duration, repeat);
+    auto slabs = spec("elastic.mu", Scope::Boxes);
+    for (int k = 0; k + 1 < regions; ++k) {
+      const double z0 = 0.2 * k / regions, z1 = 0.2 * (k + 1) / regions;
+      slabs.boxes.push_back({Eigen::Vector3d(-1, -1, z0), Eigen::Vector3d(1, 1, z1)});
+    }
+    struct Case {
+      std::string name;
+      std::vector<FitParameterSpec> specs;
+      bool forward;
+    };
+    const std::vector<Case> cases = {
+        {"4 global", {}, true},
+        {"regions", {slabs}, regions <= 100},
+        {"per element", {spec("elastic.mu", Scope::PerElement)}, false},
+    };
+    fmt::print(
+        "| map | parameters | Φ alone (s) | Φ + adjoint (s) | ratio | backward/forward steps "
+        "| Φ + forward sens. (s) | ratio |\n|---|---|---|---|---|---|---|---|\n");
+    for (const auto& c : cases) {
+      FitProblem problem(s, c.specs);
+      const Timing f = time_evaluation(problem, GradientMethod::kNone, repeat);
+      const Timing a = time_evaluation(problem, GradientMethod::kAdjoint, repeat);
+      std::string fwd = "- | -";
+      if (c.forward) {
+        const Timing t = time_evaluation(problem, GradientMethod::kForward, 1);
+        fwd = fmt::format("{:.3g} | {:.2f}", t.seconds, t.seconds / f.seconds);
+      }
+      fmt::print("| {} | {} | {:.3g} | {:.3g} | {:.2f} | {}/{} | {} |\n", c.name,
+                 problem.map().size(), f.seconds, a.seconds, a.seconds / f.seconds,
+                 a.backward_steps, f.steps, fwd);
+      std::fflush(stdout);
+    }
+  }
+
+  if (memory) {
+    fmt::print(
+        "\npeak resident memory (MiB), h = {} mm, 4 global parameters, segments of {} s, "
+        "checkpoints every {} steps\n",
+        1e3 * h, segment, kDefaultCheckpointSteps);
+    fmt::print(
+        "| duration (s) | steps | Φ alone | adjoint, one segment | adjoint, segments |\n"
+        "|---|---|---|---|---|\n");
+    const Scenario s = with_observations(h, 100 * memory_base, dir + "/memory");
+    for (double factor : {1.0, 10.0, 100.0}) {
+      Scenario sc = s;
+      sc.time.end = memory_base * factor;
+      GradientOptions none, single, segmented;
+      none.method = GradientMethod::kNone;
+      segmented.segment = segment;
+      long steps = 0, unused = 0;
+      const double m0 = peak_memory(sc, {}, none, &steps);
+      const double m1 = peak_memory(sc, {}, single, &unused);
+      const double m2 = peak_memory(sc, {}, segmented, &unused);
+      fmt::print("| {:g} | {} | {:.1f} | {:.1f} | {:.1f} |\n", sc.time.end, steps, m0, m1, m2);
+      std::fflush(stdout);
+    }
+  }
+  return 0;
+}
