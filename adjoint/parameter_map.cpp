@@ -74,21 +74,26 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
         b.per_element = true;
         break;
       case Scope::Boxes: {
+        // Box k takes the elements whose centroid it holds first; the rest share
+        // one more entry. Boxes that hold no element get no entry.
         const int nb = static_cast<int>(spec.boxes.size());
-        bool rest = false;
+        std::vector<int> raw(ne, nb);
         for (int e = 0; e < ne; ++e) {
           const Eigen::Vector3d c = centroid(mesh, e);
-          b.entry[e] = nb;
           for (int k = 0; k < nb; ++k)
             if ((c.array() >= spec.boxes[k].first.array()).all() &&
                 (c.array() <= spec.boxes[k].second.array()).all()) {
-              b.entry[e] = k;
+              raw[e] = k;
               break;
             }
-          rest = rest || b.entry[e] == nb;
         }
-        for (int k = 0; k < nb; ++k) suffix.push_back(fmt::format("[box {}]", k));
-        if (rest) suffix.push_back("[outside boxes]");
+        std::map<int, int> used;
+        for (int e = 0; e < ne; ++e) used.emplace(raw[e], 0);
+        for (auto& [k, i] : used) {
+          i = static_cast<int>(suffix.size());
+          suffix.push_back(k < nb ? fmt::format("[box {}]", k) : "[outside boxes]");
+        }
+        for (int e = 0; e < ne; ++e) b.entry[e] = used[raw[e]];
         break;
       }
     }
