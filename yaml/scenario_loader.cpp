@@ -95,8 +95,13 @@ Scenario load_scenario(const std::string& path) {
     d.fail(root["initial"], "initial",
            "static needs at least one clamp: an unclamped body under load has no equilibrium");
   if (root["markers"]) s.markers = scenario_detail::load_markers(d, root["markers"], s.mesh);
-  // `fit` and `diagnose` belong to the fitting and diagnosis drivers, which read
-  // them from the file themselves; here they are only reserved names.
+  // `fit` is checked last: it refers to the material, the markers and the run time.
+  if (root["fit"]) {
+    s.fit = scenario_detail::load_fit(d, root["fit"], s);
+    s.fit.present = true;
+  }
+  // `diagnose` belongs to the diagnosis driver, which reads it from the file itself;
+  // here it is only a reserved name.
   return s;
 }
 

@@ -15,5 +15,7 @@ Mesh load_mesh(const yamlutil::Doc& d, const YAML::Node& node);
 std::vector<ClampSpec> load_clamps(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh,
                                    const TimeSpec& time);
 MarkersSpec load_markers(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh);
+/// The `fit:` section, checked against the rest of the scenario (material, markers, time).
+FitSpec load_fit(const yamlutil::Doc& d, const YAML::Node& node, const Scenario& s);
 
 }  // namespace kelvin::scenario_detail

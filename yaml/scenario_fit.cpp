@@ -1,0 +1,370 @@
+// The `fit:` section: which material quantities are fitted (and over which part of
+// the body), the misfit, the optimiser and its stopping rules. Everything that can
+// be checked against the rest of the scenario (the model's parameter names and
+// ranges, marker names, the run's duration, further experiment files) is checked
+// here, so that a fit never starts on a file it would refuse hours later.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <climits>
+#include <filesystem>
+
+#include "engine/error.hpp"
+#include "materials/material.hpp"
+#include "yaml/scenario_sections.hpp"
+
+namespace kelvin::scenario_detail {
+namespace {
+
+using YAML::Node;
+using yamlutil::Doc;
+using yamlutil::join;
+using Scope = FitParameterSpec::Scope;
+
+/// What a fit target can be, and its default range and transform.
+struct TargetInfo {
+  std::string unit;
+  double lower = -1e300, upper = 1e300;
+  bool positive = false;
+  double current = 0;  // the scenario's value, the default start
+};
+
+std::vector<ParamInfo> term_params(const MaterialTermSpec& term) {
+  return create_material(term.model, term.plugin)->params();
+}
+
+std::vector<std::string> valid_targets(const Scenario& s) {
+  std::vector<std::string> names = {"density"};
+  for (const auto& p : term_params(s.material.elastic)) names.push_back("elastic." + p.name);
+  if (s.material.viscous)
+    for (const auto& p : term_params(*s.material.viscous)) names.push_back("viscous." + p.name);
+  return names;
+}
+
+std::string names_list(const std::vector<std::string>& names) {
+  std::string s;
+  for (const auto& n : names) s += (s.empty() ? "" : ", ") + n;
+  return s;
+}
+
+TargetInfo resolve_target(const Doc& d, const Node& at, const std::string& P,
+                          const std::string& target, const Scenario& s) {
+  if (target == "density") {
+    TargetInfo t;
+    t.unit = "kg/m³";
+    t.lower = 0;
+    t.positive = true;
+    t.current = s.material.density;
+    return t;
+  }
+  const auto dot = target.find('.');
+  const std::string part = target.substr(0, dot);
+  const std::string name = dot == std::string::npos ? "" : target.substr(dot + 1);
+  if (part == "viscous" && dot != std::string::npos && !s.material.viscous)
+    d.fail(at, P,
+           fmt::format("'{}' names a viscous parameter, but the material has no viscous term "
+                       "(material.viscous); fittable: {}",
+                       target, names_list(valid_targets(s))));
+  if (dot != std::string::npos &&
+      (part == "elastic" || (part == "viscous" && s.material.viscous))) {
+    const MaterialTermSpec& term = part == "elastic" ? s.material.elastic : *s.material.viscous;
+    for (const auto& p : term_params(term))
+      if (p.name == name) {
+        TargetInfo t;
+        t.unit = p.unit;
+        t.lower = p.lower;
+        t.upper = p.upper;
+        t.positive = p.positive;
+        t.current = term.params.at(p.name);
+        return t;
+      }
+  }
+  const auto names = valid_targets(s);
+  const std::string hint = yamlutil::suggestion(target, names, "fittable");
+  d.fail(at, P,
+         fmt::format(
+             "'{}' is not a fittable quantity of this scenario; {}{}", target, hint,
+             hint.rfind("did you mean", 0) == 0 ? " (fittable: " + names_list(names) + ")" : ""));
+}
+
+bool boolean(const Doc& d, const Node& n, const std::string& path) {
+  const std::string v = d.string(n, path);
+  bool b = false;
+  try {
+    b = n.as<bool>();
+  } catch (const YAML::Exception&) {
+    d.fail(n, path, fmt::format("must be true or false (got '{}')", v));
+  }
+  return b;
+}
+
+int int_at_least(const Doc& d, const Node& n, const std::string& path, long min) {
+  const long v = d.integer(n, path);
+  if (v < min)
+    d.fail(n, path,
+           min == 0 ? fmt::format("must not be negative (got {})", v)
+                    : fmt::format("must be at least {} (got {})", min, v));
+  if (v > INT_MAX) d.fail(n, path, fmt::format("is too large (got {}; at most {})", v, INT_MAX));
+  return static_cast<int>(v);
+}
+
+std::string fmt_bound(double v) {
+  if (v >= 1e300) return "+inf";
+  if (v <= -1e300) return "-inf";
+  return fmt::format("{:g}", v);
+}
+
+std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> load_boxes(const Doc& d, const Node& n,
+                                                                    const std::string& P) {
+  d.check_keys(n, P, {"boxes"});
+  const std::string BP = join(P, "boxes");
+  const Node list = d.required(n, P, "boxes");
+  d.require_sequence(list, BP);
+  if (list.size() == 0)
+    d.fail(list, BP, "must list at least one box {min: [x, y, z], max: [x, y, z]}");
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;
+  for (size_t k = 0; k < list.size(); ++k) {
+    const Node b = list[k];
+    const std::string KP = yamlutil::index(BP, k);
+    d.check_keys(b, KP, {"min", "max"});
+    const Eigen::Vector3d lo = d.vec3(d.required(b, KP, "min"), join(KP, "min"));
+    const Node max_node = d.required(b, KP, "max");
+    const Eigen::Vector3d hi = d.vec3(max_node, join(KP, "max"));
+    for (int i = 0; i < 3; ++i)
+      if (hi[i] <= lo[i])
+        d.fail(max_node, join(KP, "max"),
+               fmt::format("must exceed min in every coordinate (max.{0} = {1:g} is not above "
+                           "min.{0} = {2:g})",
+                           "xyz"[i], hi[i], lo[i]));
+    boxes.emplace_back(lo, hi);
+  }
+  return boxes;
+}
+
+const char* scope_name(Scope scope) {
+  switch (scope) {
+    case Scope::Global:
+      return "global";
+    case Scope::PerRegion:
+      return "per-region";
+    case Scope::PerElement:
+      return "per-element";
+    case Scope::Boxes:
+      return "boxes";
+  }
+  return "";
+}
+
+FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& P,
+                                const Scenario& s) {
+  FitParameterSpec spec;
+  spec.line = n.Mark().line + 1;
+  // `- elastic.mu` is short for `- { target: elastic.mu }`.
+  const bool shorthand = n.IsScalar();
+  if (!shorthand) d.check_keys(n, P, {"target", "initial", "lower", "upper", "log", "scope"});
+  const Node target_node = shorthand ? n : d.required(n, P, "target");
+  const std::string TP = shorthand ? P : join(P, "target");
+  spec.target = d.string(target_node, TP);
+  const TargetInfo info = resolve_target(d, target_node, TP, spec.target, s);
+  const std::string what = fmt::format("'{}'", spec.target);
+  auto range = [&](double lo, double hi) {
+    return fmt::format("[{}, {}]{}", fmt_bound(lo), fmt_bound(hi),
+                       info.unit.empty() || info.unit == "1" ? "" : " " + info.unit);
+  };
+
+  spec.lower = info.lower;
+  spec.upper = info.upper;
+  spec.log = info.positive;
+  if (shorthand) {
+    spec.scope = Scope::Global;
+  } else {
+    const Node lo = n["lower"], hi = n["upper"];
+    if (lo) spec.lower = d.number(lo, join(P, "lower"));
+    if (hi) spec.upper = d.number(hi, join(P, "upper"));
+    const Node log_node = n["log"];
+    if (log_node) spec.log = boolean(d, log_node, join(P, "log"));
+    if (spec.log && spec.lower < 0) {
+      if (lo)
+        d.fail(lo, join(P, "lower"),
+               fmt::format("a log-transformed parameter must stay positive, but lower is {:g}; "
+                           "raise lower to 0 or more, or set log: false",
+                           spec.lower));
+      d.fail(log_node, join(P, "log"),
+             fmt::format("{} may be negative (its range is {}); a log-transformed parameter "
+                         "needs lower: 0 or more",
+                         what, range(info.lower, info.upper)));
+    }
+
+    // Bounds beyond the model's admissible range would let the optimiser try values
+    // the model refuses.
+    if (lo && (spec.lower < info.lower || spec.lower > info.upper))
+      d.fail(lo, join(P, "lower"),
+             fmt::format("{:g} is outside the admissible range {} of {}", spec.lower,
+                         range(info.lower, info.upper), what));
+    if (hi && (spec.upper < info.lower || spec.upper > info.upper))
+      d.fail(hi, join(P, "upper"),
+             fmt::format("{:g} is outside the admissible range {} of {}", spec.upper,
+                         range(info.lower, info.upper), what));
+    if (spec.lower >= spec.upper)
+      d.fail(hi ? hi : lo, join(P, hi ? "upper" : "lower"),
+             fmt::format("lower ({}) must be below upper ({})", fmt_bound(spec.lower),
+                         fmt_bound(spec.upper)));
+
+    if (const Node v = n["initial"]) {
+      const double x = d.number(v, join(P, "initial"));
+      if (x < spec.lower || x > spec.upper)
+        d.fail(
+            v, join(P, "initial"),
+            fmt::format("{:g} is outside [lower, upper] = {}", x, range(spec.lower, spec.upper)));
+      if (spec.log && x <= 0)
+        d.fail(v, join(P, "initial"),
+               fmt::format("a log-transformed parameter must start positive (got {:g})", x));
+      spec.initial = x;
+    }
+
+    if (const Node sc = n["scope"]) {
+      const std::string SP = join(P, "scope");
+      if (sc.IsMap()) {
+        spec.scope = Scope::Boxes;
+        spec.boxes = load_boxes(d, sc, SP);
+      } else {
+        const std::string v = d.choice(sc, SP, {"global", "per-region", "per-element"});
+        spec.scope = v == "global"       ? Scope::Global
+                     : v == "per-region" ? Scope::PerRegion
+                                         : Scope::PerElement;
+      }
+    }
+  }
+
+  // Without `initial` the fit starts from the scenario's own value.
+  if (!spec.initial) {
+    if (info.current < spec.lower || info.current > spec.upper)
+      d.fail(n, P,
+             fmt::format("{} starts at the scenario's value {:g}, outside [lower, upper] = {}; "
+                         "give 'initial' or widen the bounds",
+                         what, info.current, range(spec.lower, spec.upper)));
+    if (spec.log && info.current <= 0)
+      d.fail(n, P,
+             fmt::format("{} starts at the scenario's value {:g}, but a log-transformed "
+                         "parameter must start positive; give 'initial' or set log: false",
+                         what, info.current));
+  }
+  return spec;
+}
+
+void load_objective(const Doc& d, const Node& n, const Scenario& s, ObjectiveSpec& obj) {
+  const std::string P = "fit.objective";
+  d.check_keys(n, P, {"weights", "window"});
+  if (const Node w = n["weights"]) {
+    const std::string WP = join(P, "weights");
+    d.require_map(w, WP);
+    std::vector<std::string> names;
+    for (const auto& m : s.markers.embedded) names.push_back(m.name);
+    for (auto it = w.begin(); it != w.end(); ++it) {
+      const std::string key = d.string(it->first, WP);
+      const std::string KP = join(WP, key);
+      if (names.empty())
+        d.fail(it->first.Mark(), KP, "the scenario has no markers (markers.rest) to weight");
+      if (std::find(names.begin(), names.end(), key) == names.end())
+        d.fail(it->first.Mark(), KP,
+               fmt::format("'{}' is not a marker of this scenario; {}", key,
+                           yamlutil::suggestion(key, names, "markers")));
+      if (obj.weights.count(key)) d.fail(it->first.Mark(), KP, "is given twice");
+      obj.weights[key] = d.non_negative(it->second, KP, "");
+    }
+  }
+  if (const Node win = n["window"]) {
+    const std::string WP = join(P, "window");
+    if (!win.IsSequence() || win.size() != 2)
+      d.fail(win, WP, "must be a list of two times [begin, end] in s");
+    const double a = d.non_negative(win[0], yamlutil::index(WP, 0), "s");
+    const double b = d.number(win[1], yamlutil::index(WP, 1));
+    if (b <= a)
+      d.fail(win[1], yamlutil::index(WP, 1),
+             fmt::format("the window must end after it begins (got [{:g}, {:g}] s)", a, b));
+    if (b > s.time.end)
+      d.fail(win[1], yamlutil::index(WP, 1),
+             fmt::format("{:g} s is after the end of the run (time.end = {:g} s)", b, s.time.end));
+    obj.window_begin = a;
+    obj.window_end = b;
+  }
+}
+
+}  // namespace
+
+FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
+  const std::string P = "fit";
+  d.check_keys(n, P,
+               {"parameters", "objective", "gradient", "algorithm", "max_evaluations", "ftol_rel",
+                "xtol_rel", "max_seconds", "smoothness", "lcurve", "experiments",
+                "checkpoint_steps", "segment"});
+  FitSpec f;
+  f.present = true;
+
+  const std::string PP = join(P, "parameters");
+  const Node params = d.required(n, P, "parameters");
+  d.require_sequence(params, PP);
+  if (params.size() == 0)
+    d.fail(params, PP,
+           fmt::format("must list at least one parameter to fit (fittable: {})",
+                       names_list(valid_targets(s))));
+  for (size_t i = 0; i < params.size(); ++i) {
+    const std::string IP = yamlutil::index(PP, i);
+    FitParameterSpec spec = load_parameter(d, params[i], IP, s);
+    for (const auto& prev : f.parameters)
+      if (prev.target == spec.target && prev.scope == spec.scope)
+        d.fail(params[i], IP,
+               fmt::format("'{}' with scope {} is already fitted by the entry on line {}",
+                           spec.target, scope_name(spec.scope), prev.line));
+    f.parameters.push_back(std::move(spec));
+  }
+
+  if (const Node o = n["objective"]) load_objective(d, o, s, f.objective);
+
+  const Node grad = n["gradient"], alg = n["algorithm"];
+  if (grad) f.gradient = d.choice(grad, join(P, "gradient"), {"adjoint", "forward", "none"});
+  if (alg) f.algorithm = d.choice(alg, join(P, "algorithm"), {"lbfgs", "mma", "slsqp", "bobyqa"});
+  if (f.algorithm == "bobyqa") {
+    if (!grad)
+      f.gradient = "none";  // derivative-free: computing gradients would be wasted work
+    else if (f.gradient != "none")
+      d.fail(grad, join(P, "gradient"),
+             fmt::format("algorithm bobyqa is derivative-free and uses no gradient; set "
+                         "gradient: none or pick lbfgs, mma or slsqp (got '{}')",
+                         f.gradient));
+  } else if (f.gradient == "none") {
+    d.fail(grad, join(P, "gradient"),
+           fmt::format("algorithm {} needs gradients; use gradient: adjoint or forward, or the "
+                       "derivative-free algorithm: bobyqa",
+                       f.algorithm));
+  }
+
+  if (const Node v = n["max_evaluations"])
+    f.max_evaluations = int_at_least(d, v, join(P, "max_evaluations"), 1);
+  if (const Node v = n["ftol_rel"]) f.ftol_rel = d.non_negative(v, join(P, "ftol_rel"), "");
+  if (const Node v = n["xtol_rel"]) f.xtol_rel = d.non_negative(v, join(P, "xtol_rel"), "");
+  if (const Node v = n["max_seconds"])
+    f.max_seconds = d.non_negative(v, join(P, "max_seconds"), "s");
+  if (const Node v = n["smoothness"]) f.smoothness = d.non_negative(v, join(P, "smoothness"), "");
+  if (const Node v = n["lcurve"]) {
+    const std::string LP = join(P, "lcurve");
+    d.require_sequence(v, LP);
+    for (size_t i = 0; i < v.size(); ++i)
+      f.lcurve.push_back(d.positive(v[i], yamlutil::index(LP, i), ""));
+  }
+  if (const Node v = n["experiments"]) {
+    const std::string EP = join(P, "experiments");
+    d.require_sequence(v, EP);
+    for (size_t i = 0; i < v.size(); ++i) {
+      // Absolute, so that it means the same file whatever directory it is joined to.
+      const std::string file = d.existing_file(v[i], yamlutil::index(EP, i));
+      f.experiments.push_back(std::filesystem::absolute(file).lexically_normal().string());
+    }
+  }
+  if (const Node v = n["checkpoint_steps"])
+    f.checkpoint_steps = int_at_least(d, v, join(P, "checkpoint_steps"), 0);
+  if (const Node v = n["segment"]) f.segment = d.non_negative(v, join(P, "segment"), "s");
+  return f;
+}
+
+}  // namespace kelvin::scenario_detail
