@@ -44,6 +44,20 @@ MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
         t0_, t1_));
 }
 
+Eigen::Vector3d MarkerObjective::frame_slope(int i, size_t k, size_t other) const {
+  // Three-point derivative on a non-uniform grid (exact for quadratics) when both
+  // neighbours of frame k were seen; else the secant towards `other`, the other
+  // end of the interval being interpolated.
+  const auto& x = track_[i];
+  const size_t n = times_.size();
+  if (k > 0 && k + 1 < n && x.col(k - 1).allFinite() && x.col(k + 1).allFinite()) {
+    const double h0 = times_[k] - times_[k - 1], h1 = times_[k + 1] - times_[k];
+    return (h0 * h0 * (x.col(k + 1) - x.col(k)) + h1 * h1 * (x.col(k) - x.col(k - 1))) /
+           (h0 * h1 * (h0 + h1));
+  }
+  return (x.col(other) - x.col(k)) / (times_[other] - times_[k]);
+}
+
 bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar) const {
   if (t < t0_ || t > t1_ || times_.size() < 2 || t < times_.front() || t > times_.back())
     return false;
@@ -52,8 +66,14 @@ bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar) const {
   k = k == 0 ? 0 : k - 1;
   const auto a = track_[i].col(k), b = track_[i].col(k + 1);
   if (!a.allFinite() || !b.allFinite()) return false;
-  const double s = (t - times_[k]) / (times_[k + 1] - times_[k]);
-  xbar = (1 - s) * a + s * b;
+  // Cubic Hermite between frames, slopes from the neighbouring frames: a linear
+  // track cuts the corners of a 17 Hz motion sampled at 200 Hz by ~0.7 mm, a bias
+  // that fits would absorb into the damping parameters.
+  const double h = times_[k + 1] - times_[k];
+  const double s = (t - times_[k]) / h;
+  const double s2 = s * s, s3 = s2 * s;
+  xbar = (2 * s3 - 3 * s2 + 1) * a + (-2 * s3 + 3 * s2) * b +
+         h * ((s3 - 2 * s2 + s) * frame_slope(i, k, k + 1) + (s3 - s2) * frame_slope(i, k + 1, k));
   return true;
 }
 
