@@ -42,14 +42,28 @@ std::vector<double> event_times(double rate, double end) {
 }  // namespace
 
 std::unique_ptr<FemModel> build_model(const Scenario& s) {
+  const int ne = s.mesh.num_tets();
   std::vector<MaterialTerm> terms;
-  terms.push_back(make_term(s.material.elastic, s.mesh.num_tets()));
-  if (s.material.viscous) terms.push_back(make_term(*s.material.viscous, s.mesh.num_tets()));
+  terms.push_back(make_term(s.material.elastic, ne));
+  if (s.material.viscous) terms.push_back(make_term(*s.material.viscous, ne));
+  Eigen::VectorXd density = Eigen::VectorXd::Constant(ne, s.material.density);
+  for (const auto& f : s.material.fields) {
+    // The loader checks this for files; a Scenario assembled in code is not checked.
+    if (f.values.size() != ne)
+      throw Error(fmt::format("{}: material.fields: {} has {} values for {} elements",
+                              s.material.fields_path, f.target, f.values.size(), ne));
+    if (f.term >= static_cast<int>(terms.size()))
+      throw Error(fmt::format("{}: material.fields: {} names a term the material lacks",
+                              s.material.fields_path, f.target));
+    if (f.term < 0)
+      density = f.values;
+    else
+      terms[f.term].q.row(f.index) = f.values.transpose();
+  }
   std::vector<ClampBinding> clamps;
   for (const auto& c : s.clamps) clamps.push_back({c.name, c.nodes, c.motion});
-  return std::make_unique<FemModel>(
-      s.mesh, std::move(terms), Eigen::VectorXd::Constant(s.mesh.num_tets(), s.material.density),
-      s.gravity, std::move(clamps), s.solver.lumped_mass);
+  return std::make_unique<FemModel>(s.mesh, std::move(terms), std::move(density), s.gravity,
+                                    std::move(clamps), s.solver.lumped_mass);
 }
 
 IntegratorOptions integrator_options(const SolverSpec& solver) {

@@ -25,10 +25,21 @@ struct MaterialTermSpec {
   std::vector<double> state;             // per-element fixed state; empty = model's default
 };
 
+/// One column of `material.fields`: a quantity given element by element, which
+/// replaces the scalar of the same name everywhere.
+struct MaterialField {
+  std::string target;      // "density", "elastic.<param>" or "viscous.<param>"
+  int term = -1;           // −1 density, 0 elastic, 1 viscous (FemModel::terms() order)
+  int index = 0;           // parameter index in the term's model params()
+  Eigen::VectorXd values;  // per element, model units
+};
+
 struct MaterialSpec {
   double density = 0;  // kg/m³
   MaterialTermSpec elastic;
   std::optional<MaterialTermSpec> viscous;
+  std::string fields_path;            // resolved `material.fields` ("" if none)
+  std::vector<MaterialField> fields;  // in the file's column order
 };
 
 struct ClampSpec {
@@ -69,10 +80,10 @@ struct FitParameterSpec {
   /// Scope::Boxes: an element whose centroid lies in box k gets parameter k (first
   /// match); elements in no box share one more parameter.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;  // (min, max)
-  std::optional<double> initial;  // default: the scenario's value
-  double lower = 0, upper = 0;    // admissible range (defaults from the model's ParamInfo)
-  bool log = false;               // optimise ln q (default: true for strictly positive q)
-  int line = 0;                   // 1-based line in the scenario file, for messages
+  std::optional<double> initial;                                   // default: the scenario's value
+  double lower = 0, upper = 0;  // admissible range (defaults from the model's ParamInfo)
+  bool log = false;             // optimise ln q (default: true for strictly positive q)
+  int line = 0;                 // 1-based line in the scenario file, for messages
 };
 
 /// The marker misfit Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ − x̄ᵢ‖² dt over a time window.
@@ -90,12 +101,12 @@ struct FitSpec {
   std::string algorithm = "lbfgs";   // lbfgs | mma | slsqp | bobyqa
   int max_evaluations = 200;
   double ftol_rel = 1e-10, xtol_rel = 1e-8;
-  double max_seconds = 0;                   // 0 = no limit
-  double smoothness = 0;                    // γ of the per-element smoothness term
-  std::vector<double> lcurve;               // γ values of an L-curve sweep (empty = none)
-  std::vector<std::string> experiments;     // further scenario files fitted jointly
-  int checkpoint_steps = 0;                 // IDAS steps between adjoint checkpoints; 0 = default
-  double segment = 0;                       // s per adjoint segment; 0 = a single segment
+  double max_seconds = 0;                // 0 = no limit
+  double smoothness = 0;                 // γ of the per-element smoothness term
+  std::vector<double> lcurve;            // γ values of an L-curve sweep (empty = none)
+  std::vector<std::string> experiments;  // further scenario files fitted jointly
+  int checkpoint_steps = 0;              // IDAS steps between adjoint checkpoints; 0 = default
+  double segment = 0;                    // s per adjoint segment; 0 = a single segment
 };
 
 struct Scenario {

@@ -2,8 +2,12 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <map>
 
 #include "engine/error.hpp"
 #include "materials/material.hpp"
@@ -156,6 +160,172 @@ MaterialTermSpec load_term(const Doc& d, const Node& n, const std::string& P, bo
   return spec;
 }
 
+/// A `material.fields` file as written, with its format checked (the targets and
+/// values are checked against the material by the caller, the element count
+/// against the mesh).
+struct FieldsTable {
+  std::string path;
+  int header_line = 0;
+  std::vector<std::string> targets;  // the header after `element`
+  struct Row {
+    int line = 0;
+    int element = 0;
+    std::vector<double> values;  // one per target
+  };
+  std::vector<Row> rows;
+};
+
+std::vector<std::string> split_cells(const std::string& line) {
+  std::vector<std::string> cells;
+  size_t start = 0;
+  for (;;) {
+    const size_t comma = line.find(',', start);
+    std::string cell = line.substr(start, comma == std::string::npos ? comma : comma - start);
+    const auto a = cell.find_first_not_of(" \t"), b = cell.find_last_not_of(" \t");
+    cells.push_back(a == std::string::npos ? "" : cell.substr(a, b - a + 1));
+    if (comma == std::string::npos) return cells;
+    start = comma + 1;
+  }
+}
+
+FieldsTable read_fields_table(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error(fmt::format("{}: cannot open", path));
+  FieldsTable t;
+  t.path = path;
+  std::map<int, int> line_of;  // element → line of its row
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    const auto first = line.find_first_not_of(" \t");
+    if (first == std::string::npos || line[first] == '#') continue;
+    auto cells = split_cells(line);
+    if (t.header_line == 0) {
+      if (cells[0] != "element" || cells.size() < 2)
+        throw Error(
+            fmt::format("{}:{}: the header must be 'element' followed by the fields' "
+                        "targets, e.g. element,density,elastic.mu (got '{}')",
+                        path, n, line));
+      t.header_line = n;
+      t.targets.assign(cells.begin() + 1, cells.end());
+      continue;
+    }
+    if (cells.size() != t.targets.size() + 1)
+      throw Error(fmt::format("{}:{}: {} columns, the header has {}", path, n, cells.size(),
+                              t.targets.size() + 1));
+    FieldsTable::Row row;
+    row.line = n;
+    char* end = nullptr;
+    const long id = std::strtol(cells[0].c_str(), &end, 10);
+    if (cells[0].empty() || *end != '\0' || id < 0 || id > INT_MAX)
+      throw Error(
+          fmt::format("{}:{}: column 1 (element) '{}' is not an element id (a whole "
+                      "number from 0)",
+                      path, n, cells[0]));
+    row.element = static_cast<int>(id);
+    if (const auto [it, fresh] = line_of.emplace(row.element, n); !fresh)
+      throw Error(fmt::format("{}:{}: element {} appears twice (first on line {})", path, n,
+                              row.element, it->second));
+    for (size_t k = 1; k < cells.size(); ++k) {
+      const double v = std::strtod(cells[k].c_str(), &end);
+      if (cells[k].empty() || *end != '\0' || !std::isfinite(v))
+        throw Error(fmt::format("{}:{}: column {} ({}) '{}' is not a finite number", path, n, k + 1,
+                                t.targets[k - 1], cells[k]));
+      row.values.push_back(v);
+    }
+    t.rows.push_back(std::move(row));
+  }
+  if (t.header_line == 0)
+    throw Error(fmt::format("{}: empty file (expected a header element,<target>,...)", path));
+  if (t.rows.empty()) throw Error(fmt::format("{}: no element rows after the header", path));
+  return t;
+}
+
+/// Every element 0 … n−1 must have a row. Before the mesh is known, n is the row
+/// count, which finds gaps; with the mesh, the ids are checked against its size.
+void check_elements(const FieldsTable& t, int n, bool mesh) {
+  const int rows = static_cast<int>(t.rows.size());
+  for (const auto& r : t.rows) {
+    if (r.element < n) continue;
+    if (mesh)
+      throw Error(
+          fmt::format("{}:{}: element {} is beyond the mesh, which has {} elements "
+                      "(0 … {})",
+                      t.path, r.line, r.element, n, n - 1));
+    std::vector<bool> seen(n);
+    for (const auto& o : t.rows)
+      if (o.element < n) seen[o.element] = true;
+    const int missing = static_cast<int>(std::find(seen.begin(), seen.end(), false) - seen.begin());
+    throw Error(
+        fmt::format("{}:{}: element {} is listed, but element {} has no row (every "
+                    "element needs exactly one)",
+                    t.path, r.line, r.element, missing));
+  }
+  if (rows < n)
+    throw Error(
+        fmt::format("{}:{}: the file ends after element {}, but the mesh has {} "
+                    "elements: {} … {} have no row",
+                    t.path, t.rows.back().line, rows - 1, n, rows, n - 1));
+}
+
+std::vector<MaterialField> load_fields(const FieldsTable& t, const MaterialSpec& m) {
+  struct Quantity {
+    std::string target;
+    int term;
+    int index;
+    ParamInfo info;
+    std::string model;
+  };
+  std::vector<Quantity> known = {{"density", -1, 0, {}, ""}};
+  known[0].info.unit = "kg/m³";
+  known[0].info.positive = true;
+  known[0].info.lower = 0;
+  const std::vector<const MaterialTermSpec*> terms = {&m.elastic,
+                                                      m.viscous ? &*m.viscous : nullptr};
+  for (int term = 0; term < 2; ++term) {
+    if (!terms[term]) continue;
+    const auto params = create_material(terms[term]->model, terms[term]->plugin)->params();
+    for (int k = 0; k < static_cast<int>(params.size()); ++k)
+      known.push_back({(term == 0 ? "elastic." : "viscous.") + params[k].name, term, k, params[k],
+                       terms[term]->model});
+  }
+  std::vector<std::string> names;
+  for (const auto& q : known) names.push_back(q.target);
+
+  const int n = static_cast<int>(t.rows.size());
+  check_elements(t, n, false);
+  std::vector<MaterialField> fields;
+  for (size_t c = 0; c < t.targets.size(); ++c) {
+    const std::string& target = t.targets[c];
+    const auto q = std::find_if(known.begin(), known.end(),
+                                [&](const Quantity& k) { return k.target == target; });
+    if (q == known.end()) {
+      const std::string hint = yamlutil::suggestion(target, names, "valid");
+      throw Error(fmt::format(
+          "{}:{}: column {}: '{}' is not a quantity of this material; {}{}", t.path, t.header_line,
+          c + 2, target, hint,
+          hint.rfind("did you mean", 0) == 0 ? " (valid: " + names_list(names) + ")" : ""));
+    }
+    for (size_t o = 0; o < c; ++o)
+      if (t.targets[o] == target)
+        throw Error(fmt::format("{}:{}: column {}: '{}' is given twice (first in column {})",
+                                t.path, t.header_line, c + 2, target, o + 2));
+    MaterialField f{target, q->term, q->index, Eigen::VectorXd(n)};
+    for (const auto& r : t.rows) {
+      const double v = r.values[c];
+      const std::string problem = param_problem(q->info, v);
+      if (!problem.empty())
+        throw Error(fmt::format("{}:{}: column {} ({}) of element {}: {}{} (got {})", t.path,
+                                r.line, c + 2, target, r.element, problem,
+                                q->model.empty() ? "" : " for model '" + q->model + "'",
+                                with_unit(v, q->info.unit)));
+      f.values[r.element] = v;
+    }
+    fields.push_back(std::move(f));
+  }
+  return fields;
+}
+
 int axis_index(const Doc& d, const Node& n, const std::string& path) {
   return d.choice(n, path, {"x", "y", "z"})[0] - 'x';
 }
@@ -216,15 +386,25 @@ Mesh generate(const Doc& d, const Node& m) {
 }  // namespace
 
 MaterialSpec load_material(const Doc& d, const Node& n) {
-  d.check_keys(n, "material", {"density", "elastic", "viscous"});
+  d.check_keys(n, "material", {"density", "elastic", "viscous", "fields"});
   MaterialSpec m;
   m.density = d.positive(d.required(n, "material", "density"), "material.density", "kg/m³");
   m.elastic = load_term(d, d.required(n, "material", "elastic"), "material.elastic", false);
   if (n["viscous"]) m.viscous = load_term(d, n["viscous"], "material.viscous", true);
+  if (const Node f = n["fields"]) {
+    m.fields_path = d.existing_file(f, "material.fields");
+    try {
+      m.fields = load_fields(read_fields_table(m.fields_path), m);
+    } catch (const Error& e) {
+      d.fail(f, "material.fields", e.what());
+    }
+  }
   return m;
 }
 
-Mesh load_mesh(const Doc& d, const Node& m) {
+namespace {
+
+Mesh read_or_generate(const Doc& d, const Node& m) {
   d.require_map(m, "mesh");
   const bool has_file = m["file"].IsDefined(), has_gen = m["generate"].IsDefined();
   if (has_file && has_gen)
@@ -254,13 +434,34 @@ Mesh load_mesh(const Doc& d, const Node& m) {
     d.fail(
         f, "mesh.file",
         fmt::format("unknown mesh format '{}'; expected .msh (Gmsh) or .node/.ele (TetGen)", ext));
+  Mesh mesh;
   try {
-    Mesh mesh = read_mesh(file);
+    mesh = read_mesh(file);
     validate_mesh(mesh);
-    return mesh;
   } catch (const Error& e) {
     d.fail(f, "mesh.file", e.what());
   }
+  return mesh;
+}
+
+}  // namespace
+
+Mesh load_mesh(const Doc& d, const Node& m) {
+  Mesh mesh = read_or_generate(d, m);
+  // The material (and its fields file) is read before the mesh, so whether the
+  // fields cover the mesh can only be told here; the file is read again, being
+  // small next to the mesh, rather than widening the sections' interface.
+  const Node material = d.root()["material"];
+  if (material.IsMap() && material["fields"]) {
+    const Node f = material["fields"];
+    try {
+      check_elements(read_fields_table(d.existing_file(f, "material.fields")), mesh.num_tets(),
+                     true);
+    } catch (const Error& e) {
+      d.fail(f, "material.fields", e.what());
+    }
+  }
+  return mesh;
 }
 
 }  // namespace kelvin::scenario_detail

@@ -1,0 +1,178 @@
+#include "drivers/fitted_scenario.hpp"
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <iterator>
+#include <map>
+#include <vector>
+
+#include "engine/output.hpp"
+#include "yaml/yaml_util.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+
+// 17 significant digits read back as the same double, so that simulating
+// fitted.yaml reproduces the fitted model bit for bit.
+std::string exact(double v) {
+  return fmt::format("{:.17g}", v);
+}
+
+/// The child `key` of a mapping, or an undefined node. A non-const lookup would turn
+/// a null value (`clamps:` with nothing after it) into a mapping, and asking a
+/// missing key's node for its type throws.
+YAML::Node child(const YAML::Node& node, const std::string& key) {
+  return node.IsDefined() && node.IsMap() ? node[key] : YAML::Node(YAML::NodeType::Undefined);
+}
+
+/// A column of fitted-fields.csv: a quantity taken from the model element by element.
+struct Column {
+  std::string target;
+  int term = -1;  // −1 density, else FemModel::terms() index
+  int index = 0;
+};
+
+double model_value(const FemModel& model, int term, int index, int e) {
+  return term < 0 ? model.density()[e] : model.terms()[term].q(index, e);
+}
+
+const MaterialTermSpec& term_spec(const Scenario& s, int term) {
+  return term == 0 ? s.material.elastic : *s.material.viscous;
+}
+
+/// The scalar the scenario gives for a quantity (before any substitution here).
+double scenario_value(const Scenario& s, const FemModel& model, const Column& c) {
+  if (c.term < 0) return s.material.density;
+  return term_spec(s, c.term).params.at(model.terms()[c.term].model->params()[c.index].name);
+}
+
+/// Writes the scalar of a quantity into the `material` node.
+void set_scalar(YAML::Node material, const Scenario& s, const FemModel& model, const Column& c,
+                double v) {
+  if (c.term < 0) {
+    material["density"] = exact(v);
+    return;
+  }
+  YAML::Node term = material[c.term == 0 ? "elastic" : "viscous"];
+  const MaterialTermSpec& spec = term_spec(s, c.term);
+  const std::string name = model.terms()[c.term].model->params()[c.index].name;
+  // A λ or μ next to E and ν is refused by the loader, so the pair gives way to the
+  // λ and μ it stood for.
+  if ((name == "lambda" || name == "mu") && term["E"] && !spec.params.count("E")) {
+    term.remove("E");
+    term.remove("nu");
+    term["lambda"] = exact(spec.params.at("lambda"));
+    term["mu"] = exact(spec.params.at("mu"));
+  }
+  term[name] = exact(v);
+}
+
+void make_absolute(YAML::Node node, const yamlutil::Doc& d) {
+  if (node.IsDefined() && node.IsScalar())
+    node = fs::absolute(d.resolve(node.Scalar())).lexically_normal().string();
+}
+
+/// Every path-valued key of yaml/SCHEMA.md, since fitted.yaml lives elsewhere.
+void absolute_paths(const YAML::Node& root, const yamlutil::Doc& d) {
+  make_absolute(child(child(root, "mesh"), "file"), d);
+  const YAML::Node material = child(root, "material");
+  make_absolute(child(material, "fields"), d);
+  for (const char* term : {"elastic", "viscous"})
+    make_absolute(child(child(material, term), "plugin"), d);
+  if (const YAML::Node clamps = child(root, "clamps"); clamps.IsDefined() && clamps.IsSequence())
+    for (const auto& clamp : clamps) make_absolute(child(child(clamp, "motion"), "file"), d);
+  const YAML::Node markers = child(root, "markers");
+  make_absolute(child(markers, "rest"), d);  // a list of inline markers stays as it is
+  make_absolute(child(markers, "observed"), d);
+  if (const YAML::Node experiments = child(child(root, "fit"), "experiments");
+      experiments.IsDefined() && experiments.IsSequence())
+    for (const auto& e : experiments) make_absolute(e, d);
+}
+
+}  // namespace
+
+std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& map,
+                                  const FemModel& model, const std::string& outdir) {
+  const yamlutil::Doc doc(scenario.path);
+  YAML::Node root = doc.root();  // a handle: edits change the document's tree
+  absolute_paths(root, doc);
+  YAML::Node material = child(root, "material");
+  const int ne = model.mesh().num_tets();
+
+  // The input's own fields stay in force, now with the model's values (which are the
+  // file's where nothing was fitted).
+  std::vector<Column> columns;
+  for (const auto& f : scenario.material.fields) columns.push_back({f.target, f.term, f.index});
+  std::map<std::string, double> scalar;  // target → value now in the `material` node
+  for (const auto& b : map.blocks()) {
+    const Column c{b.target, b.slot.term, b.slot.index};
+    if (!scalar.count(c.target)) scalar[c.target] = scenario_value(scenario, model, c);
+    const auto mapped = std::find_if(b.entry.begin(), b.entry.end(), [](int j) { return j >= 0; });
+    if (mapped == b.entry.end()) continue;
+    const int first = static_cast<int>(mapped - b.entry.begin());
+    // exp(ln upper) may land an ulp outside the bounds; the fit section's start check
+    // (which reads the scalar now that `initial` is gone) would then refuse the file.
+    const double fitted = std::clamp(model_value(model, c.term, c.index, first), b.lower, b.upper);
+    const bool global = b.count == 1 && !b.per_element &&
+                        std::none_of(b.entry.begin(), b.entry.end(), [](int j) { return j < 0; });
+    if (global) {
+      scalar[c.target] = fitted;
+      set_scalar(material, scenario, model, c, fitted);
+      continue;
+    }
+    if (std::none_of(columns.begin(), columns.end(),
+                     [&](const Column& o) { return o.target == c.target; }))
+      columns.push_back(c);
+    // The field overrides the scalar, but the fit section still checks it as a start.
+    const double now = scalar[c.target];
+    if (now < b.lower || now > b.upper || (b.log && now <= 0)) {
+      scalar[c.target] = fitted;
+      set_scalar(material, scenario, model, c, fitted);
+    }
+  }
+
+  const fs::path dir(outdir);
+  fs::create_directories(dir);
+  if (columns.empty()) {
+    material.remove("fields");
+  } else {
+    std::string csv = "element";
+    for (const auto& c : columns) fmt::format_to(std::back_inserter(csv), ",{}", c.target);
+    csv += '\n';
+    for (int e = 0; e < ne; ++e) {
+      fmt::format_to(std::back_inserter(csv), "{}", e);
+      for (const auto& c : columns) {
+        csv += ',';
+        csv += exact(model_value(model, c.term, c.index, e));
+      }
+      csv += '\n';
+    }
+    // Before fitted.yaml, so that the scenario never names a file not yet there.
+    write_file_atomic((dir / "fitted-fields.csv").string(), csv);
+    material["fields"] = "fitted-fields.csv";
+  }
+
+  // The fitted values are now the scenario's, so a further fit starts from them.
+  if (const YAML::Node params = child(child(root, "fit"), "parameters");
+      params.IsDefined() && params.IsSequence())
+    for (auto p : params)
+      if (p.IsMap()) p.remove("initial");
+  // Without a name the file's stem ("fitted") would rename the outputs.
+  if (!child(root, "name")) root["name"] = scenario.name;
+
+  YAML::Emitter out;
+  out << root;
+  const std::string input = fs::absolute(scenario.path).lexically_normal().string();
+  const std::string path = (dir / "fitted.yaml").string();
+  write_file_atomic(path, fmt::format("# Written by kelvin fit from {}: that scenario with the "
+                                      "fitted parameters substituted.\n{}\n",
+                                      input, out.c_str()));
+  return path;
+}
+
+}  // namespace kelvin
