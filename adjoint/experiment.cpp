@@ -131,8 +131,9 @@ std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::Vect
   return integ;
 }
 
-bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& result) {
-  // Chunks only so that an interrupt is noticed; the stop time stays t1, so the
+bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& result,
+                            std::optional<double> t_stop) {
+  // Chunks only so that an interrupt is noticed; the stop time stays fixed, so the
   // steps do not depend on the chunking.
   const double chunk = std::max((t_end - t0) / 100, 1e-3);
   for (double t = integ.time(); t < t1;) {
@@ -142,7 +143,7 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
       return false;
     }
     t = std::min(t1, t + chunk);
-    if (!integ.advance_to(t, t1)) {
+    if (!integ.advance_to(t, t_stop.value_or(t1))) {
       result.error = integ.error();
       result.t_reached = integ.time();
       return false;

@@ -37,8 +37,15 @@ struct ExperimentRun {
   /// pass of an evaluation is built here, so that they take identical steps.
   std::unique_ptr<IdasIntegrator> start(double t, const Eigen::VectorXd& x_free,
                                         const Eigen::VectorXd& v_free);
+  /// Attaches the state sensitivities dy/dp_j (every entry j of p) to an integrator
+  /// fresh from start() at t₀, and returns their initial values yS0 (2n × p.size()):
+  /// forward-sensitivity gradients and marker sensitivities share this one setup.
+  Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ);
   /// Integrates to t1; false (with result.error, t_reached) on failure or interrupt.
-  bool advance(IdasIntegrator& integ, double t1, ExperimentResult& result);
+  /// IDAS never steps past t_stop (default t1); a later t_stop keeps the steps of a
+  /// run to t_stop and interpolates the state at t1.
+  bool advance(IdasIntegrator& integ, double t1, ExperimentResult& result,
+               std::optional<double> t_stop = std::nullopt);
   /// ∂R/∂p_j over the free dofs for every entry j of p, at the current x, v, a.
   bool param_vectors(Eigen::MatrixXd& B);
   /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a.

@@ -36,71 +36,77 @@ void pattern_multiply(const SparsePattern& P, const std::vector<double>& A, cons
 
 }  // namespace
 
-void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result) {
-  const int n = run.n, np = run.map.size();
-  FemModel& model = run.model;
+Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ) {
+  const int np = map.size();
   const SparsePattern& P = model.pattern();
 
   // Initial sensitivities: x₀_p from the static state (zero from rest), v₀_p = 0,
   // and consistent derivatives s_v' = −M⁻¹(K s_x + D s_v + ∂R/∂p) at t₀.
   Eigen::MatrixXd yS0 = Eigen::MatrixXd::Zero(2 * n, np), ypS0 = Eigen::MatrixXd::Zero(2 * n, np);
   Eigen::MatrixXd B;
-  if (run.static_initial()) {
-    run.factor_static_stiffness();
-    if (!run.param_vectors(B)) throw Error("an element is inadmissible at the static state");
-    for (int j = 0; j < np; ++j) yS0.col(j).head(n) = -run.K0->solve(B.col(j));
+  if (static_initial()) {
+    factor_static_stiffness();
+    if (!param_vectors(B)) throw Error("an element is inadmissible at the static state");
+    for (int j = 0; j < np; ++j) yS0.col(j).head(n) = -K0->solve(B.col(j));
   }
-  auto integ = run.start(run.t0, run.x0, run.v0);
   {
     Eigen::VectorXd y(2 * n), yp(2 * n);
-    y << run.x0, run.v0;
-    if (!run.dae.consistent_derivative(run.t0, y.data(), yp.data()) ||
-        !run.dae.stiffness_and_damping(run.t0, y.data()))
+    y << x0, v0;
+    if (!dae.consistent_derivative(t0, y.data(), yp.data()) ||
+        !dae.stiffness_and_damping(t0, y.data()))
       throw Error("the initial state is inadmissible");
-    run.expand(run.t0, y.data(), yp.data());
-    if (!run.param_vectors(B)) throw Error("an element is inadmissible at the initial state");
-    const AssemblyOutput& out = run.dae.last_assembly();
+    expand(t0, y.data(), yp.data());
+    if (!param_vectors(B)) throw Error("an element is inadmissible at the initial state");
+    const AssemblyOutput& out = dae.last_assembly();
     for (int j = 0; j < np; ++j) {
       Eigen::VectorXd rhs = -B.col(j);
       Eigen::VectorXd Ks = Eigen::VectorXd::Zero(n);
       pattern_multiply(P, out.K, yS0.col(j).data(), Ks.data());
       rhs -= Ks;
-      run.dae.mass_solve(rhs.data(), ypS0.col(j).data() + n);
+      dae.mass_solve(rhs.data(), ypS0.col(j).data() + n);
     }
   }
 
   // Sensitivity error weights scale with the parameter: dy/d(ln q) has the units
   // of y; dy/dq is measured per typical q.
   Eigen::VectorXd pbar(np);
-  for (const auto& b : run.map.blocks())
+  for (const auto& b : map.blocks())
     for (int j = b.offset; j < b.offset + b.count; ++j)
-      pbar[j] = b.log ? 1.0 : std::max(std::abs(run.p[j]), 1e-300);
+      pbar[j] = b.log ? 1.0 : std::max(std::abs(p[j]), 1e-300);
 
   auto cache = std::make_shared<StateCache>();
   auto params = std::make_shared<Eigen::MatrixXd>();
-  integ->add_sensitivities(
-      [&run, cache, params, n, &P](double t, const double* y, const double* yp, int ns,
-                                   const double* const* yS, const double* const* ypS,
-                                   double* const* resS) {
+  integ.add_sensitivities(
+      [this, cache, params](double t, const double* y, const double* yp, int ns,
+                            const double* const* yS, const double* const* ypS,
+                            double* const* resS) {
         if (!cache->matches(t, y, yp, 2 * n)) {
-          if (!run.dae.stiffness_and_damping(t, y)) return false;
-          run.expand(t, y, yp);
-          if (!run.param_vectors(*params)) return false;
+          if (!dae.stiffness_and_damping(t, y)) return false;
+          expand(t, y, yp);
+          if (!param_vectors(*params)) return false;
           cache->store(t, y, yp, 2 * n);
         }
-        const AssemblyOutput& out = run.dae.last_assembly();
+        const AssemblyOutput& out = dae.last_assembly();
+        const SparsePattern& P = model.pattern();
         for (int j = 0; j < ns; ++j) {
           double* r = resS[j];
           for (int i = 0; i < n; ++i) r[i] = ypS[j][i] - yS[j][n + i];
           Eigen::Map<Eigen::VectorXd> rv(r + n, n);
           rv = params->col(j);
-          run.model.mass_multiply(ypS[j] + n, r + n);
+          model.mass_multiply(ypS[j] + n, r + n);
           pattern_multiply(P, out.K, yS[j], r + n);
           pattern_multiply(P, out.D, yS[j] + n, r + n);
         }
         return true;
       },
       yS0, ypS0, pbar);
+  return yS0;
+}
+
+void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result) {
+  const int n = run.n;
+  auto integ = run.start(run.t0, run.x0, run.v0);
+  run.add_sensitivities(*integ);
   integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,
                                                 const double* const* yS, double* const* qS) {
     Eigen::Matrix3Xd x, v;

@@ -1,0 +1,32 @@
+#pragma once
+/// \file
+/// Simulated marker positions of one experiment at chosen times, optionally with
+/// their sensitivities d x*/dp (IDAS forward sensitivities): what plots, per-marker
+/// residuals and Gauss–Newton uncertainties need beyond Φ.
+#include <Eigen/Core>
+#include <atomic>
+#include <string>
+#include <vector>
+
+#include "adjoint/experiment.hpp"
+#include "adjoint/parameter_map.hpp"
+
+namespace kelvin {
+
+struct MarkerTrajectory {
+  bool ok = false;
+  std::string error;  // why the simulation failed (names the time)
+  std::vector<double> times;
+  std::vector<Eigen::Matrix3Xd> positions;  // per time: 3 × markers
+  /// Per time: (3·markers) × p.size(), row 3i+c = d x*_{i,c} / dp. Empty unless asked.
+  std::vector<Eigen::MatrixXd> sensitivities;
+};
+
+/// Simulates `experiment` at parameters p of `map` (applied to its model first)
+/// and samples the embedded markers at `times` (ascending, within the run).
+MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& map,
+                                  const Eigen::VectorXd& p, const std::vector<double>& times,
+                                  bool with_sensitivities,
+                                  const std::atomic<bool>* interrupt = nullptr);
+
+}  // namespace kelvin

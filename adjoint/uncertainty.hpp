@@ -1,0 +1,27 @@
+#pragma once
+/// \file
+/// Gauss–Newton (Fisher information) standard errors of fitted parameters, treating
+/// the observed marker coordinates at the capture frames as independent samples
+/// with one unknown noise level σ: Cov(p) = σ̂² (JᵀJ)⁻¹, σ̂² = ‖r‖² / (N − n).
+#include <Eigen/Core>
+#include <atomic>
+#include <string>
+
+#include "adjoint/fit_problem.hpp"
+
+namespace kelvin {
+
+struct ParameterUncertainty {
+  bool ok = false;
+  std::string error;
+  int observations = 0;         // N: observed coordinates used (weight > 0, in window)
+  double sigma = 0;             // σ̂ (m)
+  Eigen::MatrixXd covariance;   // optimiser space (n × n)
+  Eigen::VectorXd std_error_p;  // optimiser space
+  Eigen::VectorXd std_error;    // model units (q·σ_p for log entries)
+};
+
+ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
+                                              const std::atomic<bool>* interrupt = nullptr);
+
+}  // namespace kelvin

@@ -1,0 +1,273 @@
+// Simulated marker trajectories and their sensitivities, and Gauss–Newton parameter
+// uncertainties. The truth is simulated once by kelvin's normal path (markers.csv);
+// the other tests compare against it or perturb it with known noise.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "adjoint/fit_problem.hpp"
+#include "adjoint/marker_trajectory.hpp"
+#include "adjoint/uncertainty.hpp"
+#include "engine/simulation.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// The bar of test_gradients (144 tets, clamped at x = 0, shaken, hanging from a
+/// static state) with five markers sampled at 1 kHz: enough coordinates (~10³)
+/// that σ̂ is within a few per cent of σ for any noise draw.
+std::string bar_yaml(const std::string& material, const std::string& observed) {
+  return R"(
+name: bar
+mesh: { generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }
+material:
+)" + material +
+         R"(
+gravity: [0, 0, -9.81]
+initial: static
+clamps:
+  - name: base
+    select: { plane: { axis: x, at: 0 } }
+    motion:
+      sinusoids:
+        translation:
+          - { amplitude: 0.003, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }
+          - { amplitude: 0.002, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }
+time: { end: 0.1, output_rate: 1000 }
+solver: { rtol: 1.0e-9, atol: 1.0e-13 }
+markers:
+  rest:
+    - { name: tip, at: [0.06, 0.01, 0.01] }
+    - { name: mid, at: [0.03, 0.01, 0.02] }
+    - { name: corner, at: [0.05, 0.0, 0.0] }
+    - { name: side, at: [0.045, 0.02, 0.01] }
+    - { name: root, at: [0.005, 0.01, 0.01] }
+)" + observed;
+}
+
+const std::string kTruth = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: power-law, nu: 20, h: 0.8 })";
+const std::string kStart = R"(
+  density: 1300
+  elastic: { model: neo-hookean, lambda: 2.6e5, mu: 0.8e5 }
+  viscous: { model: power-law, nu: 30, h: 0.9 })";
+
+FitParameterSpec param(const std::string& target) {
+  FitParameterSpec s;
+  s.target = target;
+  s.lower = 0;
+  s.upper = 1e300;
+  s.log = true;
+  return s;
+}
+
+std::vector<FitParameterSpec> params(const std::vector<std::string>& targets) {
+  std::vector<FitParameterSpec> out;
+  for (const auto& t : targets) out.push_back(param(t));
+  return out;
+}
+
+class MarkerTrajectoryTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = fs::temp_directory_path() / "kelvin-marker-trajectory";
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    std::ofstream(dir_ / "truth.yaml") << bar_yaml(kTruth, "");
+    SimulationOptions o;
+    o.outdir = (dir_ / "truth").string();
+    const SimulationResult r = run_simulation(load_scenario((dir_ / "truth.yaml").string()), o);
+    ASSERT_TRUE(r.completed) << r.error;
+  }
+
+  /// A scenario with `material` whose observed tracks are the truth's markers.csv.
+  static Scenario scenario(const std::string& material, const std::string& name) {
+    const fs::path path = dir_ / (name + ".yaml");
+    std::ofstream(path) << bar_yaml(
+        material, "  observed: " + (dir_ / "truth" / "markers.csv").string() + "\n");
+    return load_scenario(path.string());
+  }
+
+  static fs::path dir_;
+};
+
+fs::path MarkerTrajectoryTest::dir_;
+
+TEST_F(MarkerTrajectoryTest, PositionsMatchTheSimulationsMarkerCsv) {
+  const Scenario s = scenario(kTruth, "positions");
+  FitProblem problem(s, params({"elastic.mu", "viscous.nu"}));
+  const MarkerTracks& truth = s.markers.observed;
+  ASSERT_EQ(truth.times.size(), 101u);
+  ASSERT_EQ(truth.names.size(), s.markers.embedded.size());
+  const Eigen::VectorXd p = problem.map().initial();
+  for (const bool sensitivities : {false, true}) {
+    const MarkerTrajectory traj =
+        simulate_markers(problem.experiment(0), problem.map(), p, truth.times, sensitivities);
+    ASSERT_TRUE(traj.ok) << traj.error;
+    ASSERT_EQ(traj.positions.size(), truth.times.size());
+    EXPECT_EQ(traj.sensitivities.size(), sensitivities ? truth.times.size() : 0u);
+    double worst = 0;
+    for (size_t k = 0; k < truth.times.size(); ++k) {
+      ASSERT_EQ(traj.positions[k].cols(), static_cast<Eigen::Index>(truth.names.size()));
+      for (size_t i = 0; i < truth.names.size(); ++i)
+        worst = std::max(
+            worst, (traj.positions[k].col(i) - truth.xyz.col(k).segment<3>(3 * static_cast<int>(i)))
+                       .cwiseAbs()
+                       .maxCoeff());
+    }
+    // markers.csv has 9 significant digits (~1e-10 m); the runs take different steps
+    // (Φ's quadrature is under error control here), so they agree to the tolerance.
+    EXPECT_LT(worst, 1e-9) << "with sensitivities: " << sensitivities;
+    std::printf("positions vs markers.csv (sensitivities %d): max |Δ| = %.3g m\n", sensitivities,
+                worst);
+  }
+}
+
+TEST_F(MarkerTrajectoryTest, SensitivitiesMatchCentralDifferences) {
+  const Scenario s = scenario(kStart, "sensitivities");
+  FitProblem problem(s, params({"elastic.mu", "viscous.nu", "density"}));
+  const ParameterMap& map = problem.map();
+  const Eigen::VectorXd p = map.initial();
+  // t = 0 is the static state (x₀_p = −K₀⁻¹ ∂R/∂p); the others lie between steps.
+  const std::vector<double> times{0.0, 0.0137, 0.0371, 0.06};
+  const MarkerTrajectory traj = simulate_markers(problem.experiment(0), map, p, times, true);
+  ASSERT_TRUE(traj.ok) << traj.error;
+  // Positions differ from run to run by ~4e-11 m (adaptive steps at rtol 1e-9), which
+  // a plain central difference divides by δ: for ν (|dx*/dp| ~ 1 mm) that is 4e-4 at
+  // δ = 1e-4. Richardson-extrapolated differences are O(δ⁴) and allow δ = 0.02.
+  const double delta = 0.02;  // in ln q
+  for (int j = 0; j < map.size(); ++j) {
+    auto central = [&](double h) {
+      Eigen::VectorXd pp = p, pm = p;
+      pp[j] += h;
+      pm[j] -= h;
+      const MarkerTrajectory plus = simulate_markers(problem.experiment(0), map, pp, times, false);
+      const MarkerTrajectory minus = simulate_markers(problem.experiment(0), map, pm, times, false);
+      EXPECT_TRUE(plus.ok && minus.ok) << plus.error << minus.error;
+      std::vector<Eigen::Matrix3Xd> d;
+      for (size_t k = 0; k < times.size(); ++k)
+        d.push_back((plus.positions[k] - minus.positions[k]) / (2 * h));
+      return d;
+    };
+    const auto d1 = central(delta), d2 = central(2 * delta);
+    double error = 0, norm = 0;
+    for (size_t k = 0; k < times.size(); ++k) {
+      const Eigen::Matrix3Xd fd = (4 * d1[k] - d2[k]) / 3;
+      const Eigen::VectorXd exact = traj.sensitivities[k].col(j);
+      error += (Eigen::Map<const Eigen::VectorXd>(fd.data(), fd.size()) - exact).squaredNorm();
+      norm += exact.squaredNorm();
+    }
+    const double rel = std::sqrt(error / norm);
+    std::printf("%s: |dx*/dp| = %.3g m, relative FD difference %.3g\n", map.label(j).c_str(),
+                std::sqrt(norm), rel);
+    EXPECT_LT(rel, 1e-5) << map.label(j);
+    EXPECT_GT(norm, 1e-10) << map.label(j);  // the markers do move with p_j
+  }
+}
+
+TEST_F(MarkerTrajectoryTest, UncertaintyRecoversTheNoiseLevel) {
+  // Noise on the truth's tracks; the root marker has weight 0, the tip is hidden in
+  // frames 30..49, and the window starts at frame 10.
+  Scenario s1 = scenario(kTruth, "noise");
+  s1.fit.objective.weights["root"] = 0;
+  s1.fit.objective.window_begin = 0.01;
+  MarkerTracks& tracks = s1.markers.observed;
+  const Eigen::MatrixXd truth = tracks.xyz;
+  std::mt19937 rng(20240611);
+  std::normal_distribution<double> normal;
+  Eigen::MatrixXd noise(truth.rows(), truth.cols());
+  for (Eigen::Index k = 0; k < noise.cols(); ++k)
+    for (Eigen::Index r = 0; r < noise.rows(); ++r) noise(r, k) = normal(rng);
+  const int tip = static_cast<int>(std::find(tracks.names.begin(), tracks.names.end(), "tip") -
+                                   tracks.names.begin());
+  for (int k = 30; k < 50; ++k) noise.col(k).segment<3>(3 * tip).setConstant(NAN);
+  Scenario s2 = s1;
+  s1.markers.observed.xyz = truth + 1e-3 * noise;
+  // The same draws doubled: σ̂ and the standard errors must double, free of
+  // sampling noise in the comparison.
+  s2.markers.observed.xyz = truth + 2e-3 * noise;
+
+  const auto targets = params({"elastic.lambda", "elastic.mu", "viscous.nu", "viscous.h"});
+  FitProblem one(s1, targets), two(s2, targets);
+  const Eigen::VectorXd p = one.map().initial();  // the true parameters
+  const ParameterUncertainty a = gauss_newton_uncertainty(one, p);
+  ASSERT_TRUE(a.ok) << a.error;
+  // Frames 10..100 (91) × 4 weighted markers − 20 hidden tip frames, 3 coordinates each.
+  EXPECT_EQ(a.observations, (91 * 4 - 20) * 3);
+  EXPECT_NEAR(a.sigma, 1e-3, 0.1e-3);
+  ASSERT_EQ(a.covariance.rows(), 4);
+  EXPECT_LT((a.covariance - a.covariance.transpose()).norm(), 1e-12 * a.covariance.norm());
+  for (int j = 0; j < 4; ++j) {
+    EXPECT_GT(a.std_error_p[j], 0);
+    EXPECT_NEAR(a.std_error[j], one.map().value(p, j) * a.std_error_p[j], 1e-12 * a.std_error[j]);
+    std::printf("%s = %.4g ± %.3g (σ_p %.3g)\n", one.map().label(j).c_str(), one.map().value(p, j),
+                a.std_error[j], a.std_error_p[j]);
+  }
+  std::printf("N = %d, sigma = %.4g mm\n", a.observations, 1e3 * a.sigma);
+
+  const ParameterUncertainty b = gauss_newton_uncertainty(two, p);
+  ASSERT_TRUE(b.ok) << b.error;
+  EXPECT_EQ(b.observations, a.observations);
+  EXPECT_NEAR(b.sigma / a.sigma, 2.0, 0.02);
+  for (int j = 0; j < 4; ++j) EXPECT_NEAR(b.std_error[j] / a.std_error[j], 2.0, 0.02);
+}
+
+TEST_F(MarkerTrajectoryTest, ScalingInvarianceIsReportedAsUnidentifiable) {
+  // Density, stiffness and viscosity scaled together (gravity and inertia with ρ)
+  // leave the motion unchanged: ln λ + ln μ + ln ν + ln ρ is unidentifiable.
+  const Scenario s = scenario(kTruth, "singular");
+  FitProblem problem(s, params({"elastic.lambda", "elastic.mu", "viscous.nu", "density"}));
+  const ParameterUncertainty u = gauss_newton_uncertainty(problem, problem.map().initial());
+  EXPECT_FALSE(u.ok);
+  EXPECT_NE(u.error.find("not identifiable"), std::string::npos) << u.error;
+  for (const char* term :
+       {"+1·ln elastic.lambda", "+1·ln elastic.mu", "+1·ln viscous.nu", "+1·ln density"})
+    EXPECT_NE(u.error.find(term), std::string::npos) << term << " in: " << u.error;
+  std::printf("%s\n", u.error.c_str());
+}
+
+TEST_F(MarkerTrajectoryTest, FailuresAreReportedNotThrown) {
+  const Scenario s = scenario(kTruth, "failures");
+  FitProblem problem(s, params({"elastic.mu"}));
+  const Eigen::VectorXd p = problem.map().initial();
+  std::atomic<bool> interrupt{true};
+  const MarkerTrajectory stopped =
+      simulate_markers(problem.experiment(0), problem.map(), p, {0.0, 0.05}, true, &interrupt);
+  EXPECT_FALSE(stopped.ok);
+  EXPECT_NE(stopped.error.find("interrupted at t = 0"), std::string::npos) << stopped.error;
+  EXPECT_EQ(stopped.positions.size(), 1u);  // the sample before the interrupt is kept
+
+  const MarkerTrajectory late =
+      simulate_markers(problem.experiment(0), problem.map(), p, {0.05, 0.2}, false);
+  EXPECT_FALSE(late.ok);
+  EXPECT_NE(late.error.find("t = 0.2"), std::string::npos) << late.error;
+}
+
+TEST_F(MarkerTrajectoryTest, PerElementFieldsAreNotComputed) {
+  // 1152 tets: the limit is checked before any simulation.
+  std::string yaml =
+      bar_yaml(kTruth, "  observed: " + (dir_ / "truth" / "markers.csv").string() + "\n");
+  yaml.replace(yaml.find("element_size: 0.01"), 18, "element_size: 0.005");
+  std::ofstream(dir_ / "fine.yaml") << yaml;
+  const Scenario s = load_scenario((dir_ / "fine.yaml").string());
+  FitParameterSpec field = param("elastic.mu");
+  field.scope = FitParameterSpec::Scope::PerElement;
+  FitProblem problem(s, {field});
+  ASSERT_GT(problem.map().size(), 200);
+  const ParameterUncertainty u = gauss_newton_uncertainty(problem, problem.map().initial());
+  EXPECT_FALSE(u.ok);
+  EXPECT_NE(u.error.find("limit 200"), std::string::npos) << u.error;
+}
+
+}  // namespace
+}  // namespace kelvin
