@@ -136,15 +136,18 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
   // Chunks only so that an interrupt is noticed; the stop time stays fixed, so the
   // steps do not depend on the chunking.
   const double chunk = std::max((t_end - t0) / 100, 1e-3);
+  // The interrupt is checked after each chunk, never before the first: IDAS's
+  // adjoint memory is allocated by the first IDASolveF, and IDAFree crashes on an
+  // adjoint memory that never integrated.
   for (double t = integ.time(); t < t1;) {
-    if (opt.interrupt && opt.interrupt->load()) {
-      result.error = fmt::format("interrupted at t = {:.6g} s", integ.time());
-      result.t_reached = integ.time();
-      return false;
-    }
     t = std::min(t1, t + chunk);
     if (!integ.advance_to(t, t_stop.value_or(t1))) {
       result.error = integ.error();
+      result.t_reached = integ.time();
+      return false;
+    }
+    if (t < t1 && opt.interrupt && opt.interrupt->load()) {
+      result.error = fmt::format("interrupted at t = {:.6g} s", integ.time());
       result.t_reached = integ.time();
       return false;
     }

@@ -60,7 +60,10 @@ Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions&
     ExperimentResult r = ex->evaluate(*map_, p, options);
     if (!r.ok && ev.ok) {
       ev.ok = false;
-      ev.error = fmt::format("{}: {}", ex->scenario().path, r.error);
+      // Name the experiment unless the message already does (static-state errors).
+      ev.error = r.error.rfind(ex->scenario().path, 0) == 0
+                     ? r.error
+                     : fmt::format("{}: {}", ex->scenario().path, r.error);
     }
     ev.phi += r.phi;
     for (int i = 0; i < ex->objective().num_markers(); ++i)

@@ -14,5 +14,6 @@ enum ExitCode { kExitOk = 0, kExitInputError = 1, kExitRunFailed = 2, kExitInter
 void register_simulate(CLI::App& app, int& exit_code);
 void register_check_material(CLI::App& app, int& exit_code);
 void register_gradcheck(CLI::App& app, int& exit_code);
+void register_fit(CLI::App& app, int& exit_code);
 
 }  // namespace kelvin

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   kelvin::register_simulate(app, exit_code);
   kelvin::register_check_material(app, exit_code);
   kelvin::register_gradcheck(app, exit_code);
+  kelvin::register_fit(app, exit_code);
 
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);

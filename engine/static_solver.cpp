@@ -61,6 +61,9 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
     hyperelastic &= term.model->is_viscous() || term.model->has_energy();
   Eigen::KLU<Eigen::SparseMatrix<double>> klu;
   Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower> cholesky;
+  // An indefinite K is expected far from equilibrium and handled below (KLU);
+  // CHOLMOD would print a warning to stderr for each one.
+  cholesky.cholmod().print = 0;
   bool analysed = false;
 
   // Load stepping: try the full load; on failure halve the increment.

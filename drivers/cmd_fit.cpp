@@ -1,0 +1,203 @@
+// `kelvin fit`: NLopt parameter estimation from captured marker motion, with the
+// history and resume state written as it goes and the outputs written at the end
+// (also after SIGINT/SIGTERM, from the best parameters so far).
+#include <fmt/format.h>
+
+#include <filesystem>
+
+#include "drivers/commands.hpp"
+#include "drivers/fit_loop.hpp"
+#include "drivers/fit_outputs.hpp"
+#include "drivers/fit_state.hpp"
+#include "engine/error.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+namespace {
+
+struct FitArgs {
+  std::string scenario, outdir, algorithm, gradient;
+  int max_evaluations = 0;
+  double max_seconds = -1;
+  bool resume = false, quiet = false;
+};
+
+std::string progress_line(const FitRecord& r) {
+  if (!r.ok)
+    return fmt::format("  eval {:4d}  simulation failed, backing off: {}", r.evaluation, r.error);
+  return fmt::format(
+      "iter {:4d}  eval {:4d}  objective {:.6e}  rms {:8.4f} mm  |grad| {:.3e}  {:7.1f} s",
+      r.iteration, r.evaluation, r.objective, r.rms * 1e3, r.gradient_norm, r.seconds);
+}
+
+FitOptions fit_options(const FitSpec& fit, const FitArgs& args) {
+  FitOptions o;
+  o.algorithm = args.algorithm.empty() ? fit.algorithm : args.algorithm;
+  o.gradient.method = parse_gradient_method(args.gradient.empty() ? fit.gradient : args.gradient);
+  if (o.algorithm == "bobyqa") o.gradient.method = GradientMethod::kNone;
+  o.gradient.checkpoint_steps = fit.checkpoint_steps;
+  o.gradient.segment = fit.segment;
+  o.gradient.interrupt = &g_interrupted;
+  o.max_evaluations = args.max_evaluations > 0 ? args.max_evaluations : fit.max_evaluations;
+  o.ftol_rel = fit.ftol_rel;
+  o.xtol_rel = fit.xtol_rel;
+  o.max_seconds = args.max_seconds >= 0 ? args.max_seconds : fit.max_seconds;
+  o.smoothness = fit.smoothness;
+  return o;
+}
+
+int run(const FitArgs& args) {
+  Scenario scenario;
+  std::unique_ptr<FitProblem> problem;
+  FitOptions options;
+  try {
+    scenario = load_scenario(args.scenario);
+    if (!scenario.fit.present)
+      fmt::print("note: {} has no fit section; fitting every material parameter, global\n",
+                 scenario.path);
+    problem = std::make_unique<FitProblem>(scenario, scenario.fit.parameters);
+    options = fit_options(scenario.fit, args);
+  } catch (const Error& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return kExitInputError;
+  }
+  const std::string outdir = args.outdir.empty()
+                                 ? std::filesystem::path(args.scenario).stem().string() + "-fit"
+                                 : args.outdir;
+  std::filesystem::create_directories(outdir);
+  const std::string state_path = (std::filesystem::path(outdir) / "fit-state.yaml").string();
+  const ParameterMap& map = problem->map();
+
+  FitState state;
+  state.scenario = std::filesystem::absolute(args.scenario).string();
+  for (int j = 0; j < map.size(); ++j) state.labels.push_back(map.label(j));
+  state.start = map.initial();
+  state.best = state.start;
+  FitHistoryFile history((std::filesystem::path(outdir) / "history.csv").string(), map);
+  Eigen::VectorXd p0 = state.start;
+  try {
+    if (args.resume) {
+      const FitState saved = read_fit_state(state_path);
+      if (saved.labels != state.labels)
+        throw Error(fmt::format(
+            "{}: saved for other parameters ({} entries, first '{}'); the "
+            "scenario's fit section changed since — start without --resume",
+            state_path, saved.labels.size(), saved.labels.empty() ? "" : saved.labels[0]));
+      history.load_existing();
+      state = saved;
+      p0 = saved.best;
+      options.first_evaluation = saved.evaluations;
+      options.first_iteration = saved.iterations;
+      options.seconds_offset = saved.seconds;
+    }
+  } catch (const Error& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return kExitInputError;
+  }
+
+  if (!args.quiet)
+    fmt::print("kelvin fit: {} — {} parameters, {} experiment(s), {} with {} gradients → {}\n",
+               scenario.name, map.size(), problem->num_experiments(), options.algorithm,
+               to_string(options.gradient.method), outdir);
+  options.on_evaluation = [&](const FitRecord& r) {
+    history.append(r);
+    state.evaluations = r.evaluation;
+    state.iterations = r.iteration;
+    state.seconds = r.seconds;
+    if (!r.ok) ++state.failures;
+    if (r.accepted) {
+      state.best = r.p;
+      state.best_objective = r.objective;
+      state.best_rms = r.rms;
+    }
+    write_fit_state(state_path, state);
+    if (!args.quiet && (r.accepted || !r.ok)) fmt::print("{}\n", progress_line(r));
+    std::fflush(stdout);
+  };
+
+  FitSession session;
+  session.outdir = outdir;
+  session.start = state.start;
+  session.algorithm = options.algorithm;
+  session.gradient_method = to_string(options.gradient.method);
+  try {
+    const FitOutcome out = run_fit(*problem, p0, options);
+    session.best = out.best.evaluation ? out.p : state.best;
+    session.stop_reason = out.stop_reason;
+    session.interrupted = out.interrupted || g_interrupted;
+    if (!scenario.fit.lcurve.empty() && !session.interrupted) {
+      if (!args.quiet) fmt::print("L-curve over {} values of gamma\n", scenario.fit.lcurve.size());
+      session.lcurve = run_lcurve(*problem, session.best, scenario.fit.lcurve, options);
+      session.interrupted = g_interrupted;
+    }
+  } catch (const Error& e) {
+    // Whatever was accepted so far is in fit-state.yaml and history.csv already.
+    fmt::print(stderr, "error: {}\nbest parameters so far are in {}\n", e.what(), state_path);
+    return kExitRunFailed;
+  }
+  session.history = history.records();
+  session.evaluations = state.evaluations;
+  session.failures = state.failures;
+  session.seconds = state.seconds;
+  if (session.best.size() == 0) session.best = state.best;
+  if (!args.quiet)
+    fmt::print("{} after {} evaluations ({} failed simulations){}\n", session.stop_reason,
+               state.evaluations, state.failures,
+               session.interrupted ? "; writing the best parameters so far" : "");
+  try {
+    const std::string report = write_fit_outputs(*problem, session, &g_interrupted);
+    fmt::print("rms {:.4f} mm → {:.4f} mm; fitted scenario: {}; report: {}\n",
+               session.history.empty() ? 0.0 : session.history.front().rms * 1e3,
+               state.best_rms * 1e3, (std::filesystem::path(outdir) / "fitted.yaml").string(),
+               report);
+  } catch (const Error& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return kExitRunFailed;
+  }
+  if (session.interrupted) {
+    fmt::print(stderr, "interrupted; continue with: kelvin fit {} -o {} --resume\n", args.scenario,
+               outdir);
+    return kExitInterrupted;
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void register_fit(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<FitArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "fit",
+      "Fit the material parameters of a scenario's fit section to its captured marker tracks "
+      "(and those of fit.experiments) with NLopt. Writes fitted.yaml (runnable by kelvin "
+      "simulate), history.csv, fit-state.yaml, marker-rms.csv, report.md with SVG plots, and "
+      "parameter fields as VTU when they vary over the body.");
+  cmd->add_option("scenario", args->scenario, "scenario YAML file with observed marker tracks")
+      ->required();
+  cmd->add_option("-o,--output", args->outdir,
+                  "output directory (default: <scenario stem>-fit in the current directory)");
+  cmd->add_flag("--resume", args->resume,
+                "continue from the output directory's fit-state.yaml (best parameters and "
+                "counters of an interrupted or exhausted fit)");
+  cmd->add_option("--max-evaluations", args->max_evaluations,
+                  "overrides fit.max_evaluations (counted over resumed runs too)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--max-seconds", args->max_seconds, "overrides fit.max_seconds")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--algorithm", args->algorithm, "overrides fit.algorithm")
+      ->check(CLI::IsMember({"lbfgs", "mma", "slsqp", "bobyqa"}));
+  cmd->add_option("--gradient", args->gradient, "overrides fit.gradient")
+      ->check(CLI::IsMember({"adjoint", "forward", "none"}));
+  cmd->add_flag("-q,--quiet", args->quiet, "print only the final line");
+  cmd->callback([args, &exit_code] {
+    try {
+      exit_code = run(*args);
+    } catch (const std::exception& e) {
+      // Errors are reported where they arise; this is the last line of defence.
+      fmt::print(stderr, "error: {}\n", e.what());
+      exit_code = kExitRunFailed;
+    }
+  });
+}
+
+}  // namespace kelvin

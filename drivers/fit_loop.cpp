@@ -1,0 +1,234 @@
+#include "drivers/fit_loop.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <exception>
+#include <nlopt.hpp>
+
+#include "engine/error.hpp"
+
+namespace kelvin {
+namespace {
+
+nlopt::algorithm nlopt_algorithm(const std::string& name) {
+  if (name == "lbfgs") return nlopt::LD_LBFGS;
+  if (name == "mma") return nlopt::LD_MMA;
+  if (name == "slsqp") return nlopt::LD_SLSQP;
+  if (name == "bobyqa") return nlopt::LN_BOBYQA;
+  throw Error(fmt::format("unknown fit algorithm '{}' (lbfgs, mma, slsqp, bobyqa)", name));
+}
+
+const char* describe(nlopt::result r) {
+  switch (r) {
+    case nlopt::SUCCESS:
+      return "converged";
+    case nlopt::STOPVAL_REACHED:
+      return "objective reached the stop value";
+    case nlopt::FTOL_REACHED:
+      return "converged: relative change of the objective below ftol_rel";
+    case nlopt::XTOL_REACHED:
+      return "converged: relative change of the parameters below xtol_rel";
+    case nlopt::MAXEVAL_REACHED:
+      return "stopped: max_evaluations reached";
+    case nlopt::MAXTIME_REACHED:
+      return "stopped: max_seconds reached";
+    default:
+      return "stopped";
+  }
+}
+
+/// The optimiser sees the objective times a scale fixed at the first evaluation.
+/// Φ in m²·s is ~1e-9 for millimetre misfits, below the absolute gradient
+/// tolerances inside NLopt's L-BFGS, which would stop at once. And L-BFGS's
+/// first trial step is the negative gradient: scaled to length ½ it changes a
+/// log-parameter by at most a factor e^½, where an unscaled step jumped a
+/// 2×-off stiffness 100× into a rigid, flat region. Derivative-free fits
+/// normalise by the first value instead.
+double objective_scale(bool ok, double objective, const Eigen::VectorXd& gradient) {
+  if (!ok || !(objective > 0)) return 1;
+  const double g = gradient.norm();
+  return g > 0 ? 0.5 / g : 1 / objective;
+}
+
+struct Context {
+  Context(FitProblem& pr, const FitOptions& o) : problem(pr), options(o) {}
+  FitProblem& problem;
+  const FitOptions& options;
+  nlopt::opt* opt = nullptr;
+  std::vector<std::pair<int, int>> pairs;  // smoothness neighbours
+  std::chrono::steady_clock::time_point start;
+  FitOutcome outcome;
+  std::exception_ptr error;  // a kelvin::Error from the callback, rethrown after optimize
+  int iteration = 0;
+  double scale = 0;  // see objective_scale
+  int budget = 0;
+  bool budget_spent = false;
+};
+
+double objective(const std::vector<double>& x, std::vector<double>& grad, void* data) {
+  auto& c = *static_cast<Context*>(data);
+  // NLopt's L-BFGS notices force_stop only between line-search trials; throwing
+  // forced_stop here ends the run before another simulation starts.
+  if (c.outcome.interrupted || c.budget_spent) throw nlopt::forced_stop();
+  const Eigen::Map<const Eigen::VectorXd> p(x.data(), static_cast<long>(x.size()));
+  try {
+    GradientOptions gopt = c.options.gradient;
+    if (grad.empty()) gopt.method = GradientMethod::kNone;
+    const Evaluation ev = c.problem.evaluate(p, gopt);
+
+    FitRecord r;
+    r.evaluation = c.options.first_evaluation + c.outcome.evaluations + 1;
+    r.p = p;
+    r.seconds = c.options.seconds_offset +
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - c.start).count();
+    r.ok = ev.ok;
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(p.size());
+    if (ev.ok) {
+      r.misfit = ev.phi;
+      r.rms = ev.rms;
+      r.penalty = c.options.smoothness * smoothness_roughness(c.pairs, p, &g);
+      g *= c.options.smoothness;
+      if (ev.gradient.size()) g += ev.gradient;
+      r.objective = r.misfit + r.penalty;
+      r.gradient_norm = ev.gradient.size() ? g.norm() : 0;
+    } else {
+      // Real2Sim returns DBL_MAX here; a finite huge value keeps every NLopt
+      // algorithm's bookkeeping sane while the line search backs off.
+      r.error = ev.error;
+      r.objective = kFailedObjective;
+      g.setZero();
+      ++c.outcome.failures;
+    }
+    ++c.outcome.evaluations;
+    const bool interrupted = c.options.gradient.interrupt && c.options.gradient.interrupt->load();
+    if (ev.ok && (c.outcome.best.evaluation == 0 || r.objective < c.outcome.best.objective)) {
+      // The first evaluation is the start point (iteration 0, or the resumed iterate).
+      r.accepted = true;
+      if (c.outcome.best.evaluation != 0) ++c.iteration;
+      r.iteration = c.iteration;
+      c.outcome.best = r;
+      c.outcome.p = p;
+    } else {
+      r.iteration = c.iteration;
+    }
+    c.outcome.history.push_back(r);
+    if (c.options.on_evaluation) c.options.on_evaluation(r);
+    if (c.scale == 0) c.scale = objective_scale(ev.ok, r.objective, g);
+    if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * g;
+    if (interrupted) {
+      c.outcome.interrupted = true;
+      c.opt->force_stop();
+    } else if (c.outcome.evaluations >= c.budget) {
+      // NLopt's L-BFGS checks maxeval only between iterations.
+      c.budget_spent = true;
+      c.opt->force_stop();
+    }
+    return ev.ok ? c.scale * r.objective : kFailedObjective;
+  } catch (...) {
+    c.error = std::current_exception();
+    c.opt->force_stop();
+    return kFailedObjective;
+  }
+}
+
+}  // namespace
+
+double smoothness_roughness(const std::vector<std::pair<int, int>>& pairs,
+                            const Eigen::Ref<const Eigen::VectorXd>& p, Eigen::VectorXd* gradient) {
+  double sum = 0;
+  for (const auto& [a, b] : pairs) {
+    const double d = p[a] - p[b];
+    sum += d * d;
+    if (gradient) {
+      (*gradient)[a] += 2 * d;
+      (*gradient)[b] -= 2 * d;
+    }
+  }
+  return sum;
+}
+
+FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOptions& options) {
+  const ParameterMap& map = problem.map();
+  const int n = map.size();
+  if (p0.size() != n) throw Error("run_fit: start vector has the wrong size");
+  const nlopt::algorithm algorithm = nlopt_algorithm(options.algorithm);
+  const bool derivative_free = algorithm == nlopt::LN_BOBYQA;
+  if (!derivative_free && options.gradient.method == GradientMethod::kNone)
+    throw Error(
+        fmt::format("fit algorithm '{}' needs a gradient (adjoint or forward)", options.algorithm));
+
+  nlopt::opt opt(algorithm, static_cast<unsigned>(n));
+  Context c{problem, options};
+  c.opt = &opt;
+  c.iteration = options.first_iteration;
+  if (options.smoothness > 0) c.pairs = map.neighbour_pairs(problem.experiment(0).scenario().mesh);
+  c.start = std::chrono::steady_clock::now();
+
+  const Eigen::VectorXd lo = map.lower(), hi = map.upper();
+  opt.set_lower_bounds(std::vector<double>(lo.data(), lo.data() + n));
+  opt.set_upper_bounds(std::vector<double>(hi.data(), hi.data() + n));
+  opt.set_min_objective(objective, &c);
+  const int budget = options.max_evaluations - options.first_evaluation;
+  if (budget <= 0) {
+    c.outcome.stop_reason = "stopped: max_evaluations already spent";
+    return c.outcome;
+  }
+  opt.set_maxeval(budget);
+  c.budget = budget;
+  opt.set_ftol_rel(options.ftol_rel);
+  opt.set_xtol_rel(options.xtol_rel);
+  if (options.max_seconds > 0)
+    opt.set_maxtime(std::max(1e-3, options.max_seconds - options.seconds_offset));
+  if (algorithm == nlopt::LD_LBFGS) opt.set_vector_storage(std::min(n, 10));
+  if (derivative_free) {
+    // BOBYQA's initial trust region: a tenth of the box, at most 0.5 in log space.
+    std::vector<double> step(n);
+    for (int j = 0; j < n; ++j)
+      step[j] =
+          std::min(map.is_log(j) ? 0.5 : 0.1 * std::abs(p0[j]) + 1e-12, 0.25 * (hi[j] - lo[j]));
+    opt.set_initial_step(step);
+  }
+
+  std::vector<double> x(p0.data(), p0.data() + n);
+  for (int j = 0; j < n; ++j) x[j] = std::clamp(x[j], lo[j], hi[j]);
+  double value = 0;
+  try {
+    c.outcome.stop_reason = describe(opt.optimize(x, value));
+  } catch (const nlopt::roundoff_limited&) {
+    c.outcome.stop_reason = "converged: no further progress possible at the objective's accuracy";
+  } catch (const nlopt::forced_stop&) {
+    c.outcome.stop_reason = c.outcome.interrupted ? "interrupted"
+                            : c.budget_spent      ? describe(nlopt::MAXEVAL_REACHED)
+                                                  : "stopped";
+  } catch (const std::runtime_error& e) {
+    if (c.error) std::rethrow_exception(c.error);
+    c.outcome.stop_reason = fmt::format("optimiser failure: {}", e.what());
+  }
+  if (c.error) std::rethrow_exception(c.error);
+  if (c.outcome.best.evaluation == 0) c.outcome.p = p0;
+  return c.outcome;
+}
+
+std::vector<LcurvePoint> run_lcurve(FitProblem& problem, const Eigen::VectorXd& p0,
+                                    std::vector<double> gammas, const FitOptions& options) {
+  std::sort(gammas.begin(), gammas.end());
+  const auto pairs = problem.map().neighbour_pairs(problem.experiment(0).scenario().mesh);
+  std::vector<LcurvePoint> curve;
+  Eigen::VectorXd p = p0;
+  for (double gamma : gammas) {
+    FitOptions o = options;
+    o.smoothness = gamma;
+    o.first_evaluation = o.first_iteration = 0;
+    const FitOutcome out = run_fit(problem, p, o);
+    if (out.best.evaluation == 0) break;  // no successful evaluation: nothing to record
+    p = out.p;
+    curve.push_back(
+        {gamma, out.best.misfit, smoothness_roughness(pairs, p), out.best.rms, out.evaluations, p});
+    if (out.interrupted) break;
+  }
+  return curve;
+}
+
+}  // namespace kelvin

@@ -1,0 +1,89 @@
+#pragma once
+/// \file
+/// The NLopt outer loop of `kelvin fit`: minimises the total misfit of a FitProblem
+/// plus a smoothness penalty on per-element fields over the optimiser-space
+/// parameters p (log-transformed where the map says so), with bounds.
+/// A trial whose simulation fails (inversion, solver failure) returns a huge
+/// objective so that the line search backs off, and is logged; it never ends the fit.
+#include <Eigen/Core>
+#include <atomic>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "adjoint/fit_problem.hpp"
+
+namespace kelvin {
+
+/// One objective evaluation as the optimiser saw it.
+struct FitRecord {
+  int evaluation = 0;  // 1-based count of simulations (with gradient) so far
+  int iteration = 0;   // accepted iterates so far (evaluations that improved the best)
+  bool accepted = false;
+  bool ok = true;  // false: the simulation failed (error says why)
+  std::string error;
+  double objective = 0;  // misfit + penalty (what the optimiser minimises)
+  double misfit = 0;     // Φ summed over experiments
+  double penalty = 0;    // γ Σ (p_a − p_b)²
+  double rms = 0;        // marker RMS (m)
+  double gradient_norm = 0;
+  double seconds = 0;  // elapsed since the fit started (s)
+  Eigen::VectorXd p;   // optimiser-space parameters of this trial
+};
+
+struct FitOptions {
+  std::string algorithm = "lbfgs";  // lbfgs | mma | slsqp | bobyqa
+  GradientOptions gradient;         // method, checkpoints, segments, interrupt
+  int max_evaluations = 200;
+  double ftol_rel = 1e-10, xtol_rel = 1e-8;
+  double max_seconds = 0;
+  double smoothness = 0;  // γ
+  /// Called after every evaluation (the driver prints accepted ones and failures,
+  /// appends history, saves the resume state).
+  std::function<void(const FitRecord&)> on_evaluation;
+  /// Numbering continues from here on --resume.
+  int first_evaluation = 0, first_iteration = 0;
+  double seconds_offset = 0;
+};
+
+struct FitOutcome {
+  Eigen::VectorXd p;  // best parameters found (optimiser space)
+  FitRecord best;
+  std::vector<FitRecord> history;  // this run's evaluations
+  int evaluations = 0, failures = 0;
+  bool interrupted = false;
+  std::string stop_reason;  // NLopt's result in words
+};
+
+/// Objective value reported for failed trials: finite (NLopt refuses infinities in
+/// some algorithms) and far above any real misfit.
+constexpr double kFailedObjective = 1e30;
+
+FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOptions& options);
+
+/// One point of an L-curve sweep over the smoothness weight γ.
+struct LcurvePoint {
+  double gamma = 0;
+  double misfit = 0;     // Φ at the fit for this γ
+  double roughness = 0;  // Σ (p_a − p_b)² over neighbour pairs
+  double rms = 0;        // m
+  int evaluations = 0;
+  Eigen::VectorXd p;  // the fit for this γ
+};
+
+/// Fits once per γ (ascending order, each warm-started from the previous fit,
+/// the first from p0) and records misfit against roughness: the L-curve whose
+/// corner balances data fit and smoothness. `options.on_evaluation` sees every
+/// evaluation of every γ.
+std::vector<LcurvePoint> run_lcurve(FitProblem& problem, const Eigen::VectorXd& p0,
+                                    std::vector<double> gammas, const FitOptions& options);
+
+/// Σ (p_a − p_b)² over neighbour pairs (ParameterMap::neighbour_pairs); adds its
+/// gradient to *gradient when given. In optimiser space, so log-transformed
+/// fields are smoothed in log space (Bächer 2008, Eq. 5.26).
+double smoothness_roughness(const std::vector<std::pair<int, int>>& pairs,
+                            const Eigen::Ref<const Eigen::VectorXd>& p,
+                            Eigen::VectorXd* gradient = nullptr);
+
+}  // namespace kelvin

@@ -1,0 +1,216 @@
+#include "drivers/fit_outputs.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include "adjoint/marker_trajectory.hpp"
+#include "adjoint/uncertainty.hpp"
+#include "drivers/fit_report.hpp"
+#include "drivers/fitted_scenario.hpp"
+#include "engine/output.hpp"
+
+namespace kelvin {
+namespace {
+
+/// Standard errors are reported for maps small enough that JᵀJ is a few
+/// forward-sensitivity runs; per-element fields are left to the L-curve.
+constexpr int kMaxUncertaintyParameters = 50;
+/// Worst and best markers plotted in the report.
+constexpr int kWorstTracks = 2, kBestTracks = 1;
+
+Eigen::VectorXd model_values(const ParameterMap& map, const Eigen::VectorXd& p) {
+  Eigen::VectorXd q(map.size());
+  for (int j = 0; j < map.size(); ++j) q[j] = map.value(p, j);
+  return q;
+}
+
+/// Per-marker RMS of every experiment at p, in experiment/marker order.
+std::vector<double> marker_rms(FitProblem& problem, const Eigen::VectorXd& p,
+                               const std::atomic<bool>* interrupt, double* overall) {
+  GradientOptions o;
+  o.method = GradientMethod::kNone;
+  o.interrupt = interrupt;
+  const Evaluation ev = problem.evaluate(p, o);
+  std::vector<double> out;
+  for (int k = 0; k < problem.num_experiments(); ++k) {
+    const auto& objective = problem.experiment(k).objective();
+    const Eigen::VectorXd rms =
+        ev.experiments[k].ok ? objective.marker_rms(ev.experiments[k].phi_per_marker)
+                             : Eigen::VectorXd::Constant(objective.num_markers(),
+                                                         std::numeric_limits<double>::quiet_NaN());
+    out.insert(out.end(), rms.data(), rms.data() + rms.size());
+  }
+  *overall = ev.ok ? ev.rms : std::numeric_limits<double>::quiet_NaN();
+  return out;
+}
+
+/// Observed frames of `marker` inside the objective window, and the simulated
+/// positions there with the start and the fitted parameters.
+bool track_plot(FitProblem& problem, int k, const std::string& marker, const FitSession& s,
+                const std::atomic<bool>* interrupt, TrackPlot& plot) {
+  Experiment& ex = problem.experiment(k);
+  const MarkerTracks& tracks = ex.scenario().markers.observed;
+  const auto& embedded = ex.scenario().markers.embedded;
+  const auto col =
+      std::find(tracks.names.begin(), tracks.names.end(), marker) - tracks.names.begin();
+  int sim = -1;
+  for (int i = 0; i < static_cast<int>(embedded.size()); ++i)
+    if (embedded[i].name == marker) sim = i;
+  if (sim < 0 || col == static_cast<long>(tracks.names.size())) return false;
+  std::vector<int> frames;
+  for (int f = 0; f < static_cast<int>(tracks.times.size()); ++f) {
+    const double t = tracks.times[f];
+    if (t >= ex.objective().window_begin() && t <= ex.objective().window_end()) frames.push_back(f);
+  }
+  if (frames.empty()) return false;
+  for (int f : frames) plot.t.push_back(tracks.times[f]);
+  const MarkerTrajectory before =
+      simulate_markers(ex, problem.map(), s.start, plot.t, false, interrupt);
+  const MarkerTrajectory after =
+      simulate_markers(ex, problem.map(), s.best, plot.t, false, interrupt);
+  if (!before.ok || !after.ok) return false;
+  const int m = static_cast<int>(frames.size());
+  plot.experiment = ex.scenario().name;
+  plot.marker = marker;
+  plot.observed.resize(3, m);
+  plot.before.resize(3, m);
+  plot.after.resize(3, m);
+  for (int j = 0; j < m; ++j) {
+    plot.observed.col(j) = tracks.xyz.block<3, 1>(3 * col, frames[j]);
+    plot.before.col(j) = before.positions[j].col(sim);
+    plot.after.col(j) = after.positions[j].col(sim);
+  }
+  return true;
+}
+
+void write_marker_rms_csv(const std::string& path, const std::vector<MarkerRms>& rows) {
+  std::string text = "experiment,marker,rms_before_mm,rms_after_mm\n";
+  for (const auto& r : rows)
+    text +=
+        fmt::format("{},{},{:.6g},{:.6g}\n", r.experiment, r.marker, r.before * 1e3, r.after * 1e3);
+  write_file_atomic(path, text);
+}
+
+/// One VTU of the fitted (and starting) parameter fields when any block varies
+/// over the body; returns its file name, or "" when every block is global.
+std::string write_parameter_fields(FitProblem& problem, const FitSession& s) {
+  const ParameterMap& map = problem.map();
+  bool varies = false;
+  for (const auto& b : map.blocks()) varies |= b.count > 1;
+  if (!varies) return "";
+  const Mesh& mesh = problem.experiment(0).scenario().mesh;
+  std::vector<std::pair<std::string, Eigen::VectorXd>> fields;
+  for (const auto& b : map.blocks()) {
+    Eigen::VectorXd fitted(mesh.num_tets()), start(mesh.num_tets());
+    for (int e = 0; e < mesh.num_tets(); ++e) {
+      const int j = b.entry[e] < 0 ? -1 : b.offset + b.entry[e];
+      fitted[e] = j < 0 ? std::numeric_limits<double>::quiet_NaN() : map.value(s.best, j);
+      start[e] = j < 0 ? std::numeric_limits<double>::quiet_NaN() : map.value(s.start, j);
+    }
+    fields.emplace_back(b.target, fitted);
+    fields.emplace_back(b.target + "_start", start);
+    fields.emplace_back(b.target + "_ratio", fitted.cwiseQuotient(start));
+  }
+  VtuSeries vtu(s.outdir, "parameters", mesh);
+  vtu.write_frame(0, mesh.nodes, Eigen::Matrix3Xd::Zero(3, mesh.num_nodes()), fields);
+  return "parameters.pvd";
+}
+
+}  // namespace
+
+std::string write_fit_outputs(FitProblem& problem, const FitSession& s,
+                              const std::atomic<bool>* interrupt) {
+  const ParameterMap& map = problem.map();
+  FitReportData data;
+  const Scenario& scenario = problem.experiment(0).scenario();
+  data.title = scenario.name;
+  data.scenario_path = scenario.path;
+  data.algorithm = s.algorithm;
+  data.gradient_method = s.gradient_method;
+  data.stop_reason = s.stop_reason;
+  data.evaluations = s.evaluations;
+  data.failures = s.failures;
+  data.seconds = s.seconds;
+  data.interrupted = s.interrupted;
+  for (int j = 0; j < map.size(); ++j) data.labels.push_back(map.label(j));
+  data.initial = model_values(map, s.start);
+  data.fitted = model_values(map, s.best);
+  data.lower = map.lower();
+  data.upper = map.upper();
+  for (int j = 0; j < map.size(); ++j)
+    if (map.is_log(j)) {
+      data.lower[j] = std::exp(data.lower[j]);
+      data.upper[j] = std::exp(data.upper[j]);
+    }
+  data.history = s.history;
+  data.lcurve = s.lcurve;
+
+  // fitted.yaml first: it is what the user came for, and needs no simulation.
+  FemModel& model = problem.experiment(0).model();
+  map.apply(s.best, model);
+  write_fitted_scenario(scenario, map, model, s.outdir);
+  data.files.push_back("fitted.yaml");
+  data.files.push_back("history.csv");
+  data.files.push_back("fit-state.yaml");
+  if (const std::string vtu = write_parameter_fields(problem, s); !vtu.empty())
+    data.files.push_back(vtu);
+
+  const bool stopped = s.interrupted || (interrupt && interrupt->load());
+  if (!stopped) {
+    const std::vector<double> before = marker_rms(problem, s.start, interrupt, &data.rms_before);
+    const std::vector<double> after = marker_rms(problem, s.best, interrupt, &data.rms_after);
+    std::vector<std::pair<int, std::string>> where;  // (experiment, marker) per row
+    for (int k = 0; k < problem.num_experiments(); ++k)
+      for (const auto& name : problem.experiment(k).objective().names()) {
+        data.markers.push_back({problem.experiment(k).scenario().name, name, before[where.size()],
+                                after[where.size()]});
+        where.emplace_back(k, name);
+      }
+    write_marker_rms_csv((std::filesystem::path(s.outdir) / "marker-rms.csv").string(),
+                         data.markers);
+    data.files.push_back("marker-rms.csv");
+
+    std::vector<int> order(data.markers.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+    std::sort(order.begin(), order.end(),
+              [&](int a, int b) { return data.markers[a].after > data.markers[b].after; });
+    std::vector<int> chosen;
+    for (int i = 0; i < std::min<int>(kWorstTracks, order.size()); ++i) chosen.push_back(order[i]);
+    for (int i = 0; i<kBestTracks&& static_cast<int>(order.size())> kWorstTracks + i; ++i)
+      chosen.push_back(order[order.size() - 1 - i]);
+    for (int i : chosen) {
+      TrackPlot plot;
+      if (track_plot(problem, where[i].first, where[i].second, s, interrupt, plot)) {
+        plot.rms_before = data.markers[i].before;
+        plot.rms_after = data.markers[i].after;
+        data.tracks.push_back(std::move(plot));
+      }
+    }
+
+    if (map.size() <= kMaxUncertaintyParameters) {
+      const ParameterUncertainty u = gauss_newton_uncertainty(problem, s.best, interrupt);
+      if (u.ok) {
+        data.std_error = u.std_error;
+        data.noise_sigma = u.sigma;
+      } else {
+        data.extra_sections.push_back(
+            fmt::format("## Standard errors\n\nNot computed: {}\n", u.error));
+      }
+    }
+  }
+  if (!s.lcurve.empty()) {
+    std::string text = "gamma,misfit,roughness,rms_mm,evaluations\n";
+    for (const auto& point : s.lcurve)
+      text += fmt::format("{:.6g},{:.9g},{:.9g},{:.6g},{}\n", point.gamma, point.misfit,
+                          point.roughness, point.rms * 1e3, point.evaluations);
+    write_file_atomic((std::filesystem::path(s.outdir) / "lcurve.csv").string(), text);
+    data.files.push_back("lcurve.csv");
+  }
+  return write_fit_report(s.outdir, data);
+}
+
+}  // namespace kelvin

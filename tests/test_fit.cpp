@@ -1,0 +1,246 @@
+// Validation of `kelvin fit` on synthetic captures made by kelvin itself with known
+// parameters: noise-free recovery from a start 2× off, Gaussian marker noise with
+// Gauss–Newton standard errors, occlusion in bursts, and the command line (outputs,
+// --resume, SIGINT).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <numeric>
+#include <random>
+#include <sstream>
+
+#include "adjoint/uncertainty.hpp"
+#include "drivers/fit_loop.hpp"
+#include "engine/csv.hpp"
+#include "test_support.hpp"
+
+namespace kelvin {
+namespace {
+
+using test::fs::path;
+
+/// A 60 × 20 × 20 mm bar (144 tets) clamped at x = 0 and shaken by two sinusoids
+/// (17 Hz along y, 13 Hz along z), hanging under gravity from a static initial
+/// state, with four markers along its length.
+std::string bar(const std::string& material, const std::string& observed = "",
+                const std::string& fit = "") {
+  std::string yaml = R"(
+name: fit-bar
+mesh: { generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }
+material:
+)" + material + R"(
+gravity: [0, 0, -9.81]
+initial: static
+clamps:
+  - name: base
+    select: { plane: { axis: x, at: 0 } }
+    motion:
+      sinusoids:
+        translation:
+          - { amplitude: 0.004, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }
+          - { amplitude: 0.003, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }
+time: { end: 0.2, output_rate: 1000 }
+solver: { rtol: 1.0e-7, atol: 1.0e-11 }
+markers:
+  rest:
+    - { name: tip, at: [0.06, 0.01, 0.01] }
+    - { name: tip_top, at: [0.06, 0.0, 0.02] }
+    - { name: mid, at: [0.03, 0.01, 0.02] }
+    - { name: quarter, at: [0.015, 0.02, 0.0] }
+)";
+  if (!observed.empty()) yaml += "  observed: " + observed + "\n";
+  return yaml + fit;
+}
+
+const std::string kTruth = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 6.0e5, mu: 3.0e5 }
+  viscous: { model: power-law, nu: 20, h: 0.8 })";
+const double kTrue[] = {6.0e5, 3.0e5, 20};  // λ, μ, ν (h stays at the truth)
+// Every fitted parameter 2× off the truth.
+const std::string kStart = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 1.2e6, mu: 1.5e5 }
+  viscous: { model: power-law, nu: 40, h: 0.8 })";
+// The flow index h is not fitted: on this 0.2 s motion the strain rates span too
+// narrow a range to separate ν from h (ν γ̇^(h−1) is nearly one number), and a
+// four-parameter fit creeps along that valley (see the issue note).
+const std::string kFitSection = R"(
+fit:
+  parameters: [elastic.lambda, elastic.mu, viscous.nu]
+  max_evaluations: 80
+  ftol_rel: 1.0e-14
+  xtol_rel: 1.0e-9
+)";
+
+/// Rewrites a wide marker CSV: adds N(0, σ²) to every coordinate, then blanks
+/// `fraction` of each marker's frames in bursts of `burst` consecutive frames.
+std::string perturb_tracks(const std::string& file, const path& out, double sigma, double fraction,
+                           int burst, unsigned seed) {
+  MarkerTracks tracks = read_marker_tracks(file);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  if (sigma > 0) tracks.xyz = tracks.xyz.unaryExpr([&](double v) { return v + noise(rng); });
+  const int frames = static_cast<int>(tracks.times.size());
+  const int bursts = static_cast<int>(std::lround(fraction * frames / burst));
+  for (int m = 0; m < static_cast<int>(tracks.names.size()); ++m) {
+    // Bursts in disjoint slots so that exactly `fraction` of the frames go missing.
+    std::vector<int> slots(frames / burst);
+    std::iota(slots.begin(), slots.end(), 0);
+    std::shuffle(slots.begin(), slots.end(), rng);
+    for (int b = 0; b < bursts; ++b)
+      for (int f = slots[b] * burst; f < slots[b] * burst + burst; ++f)
+        tracks.xyz.block(3 * m, f, 3, 1).setConstant(std::nan(""));
+  }
+  std::ostringstream csv;
+  csv << "t";
+  for (const auto& n : tracks.names) csv << "," << n << "_x," << n << "_y," << n << "_z";
+  csv << "\n";
+  csv.precision(17);
+  for (int f = 0; f < frames; ++f) {
+    csv << tracks.times[f];
+    for (int r = 0; r < tracks.xyz.rows(); ++r) {
+      csv << ",";
+      if (!std::isnan(tracks.xyz(r, f))) csv << tracks.xyz(r, f);
+    }
+    csv << "\n";
+  }
+  test::write_text(out, csv.str());
+  return out.string();
+}
+
+struct Fitted {
+  FitOutcome outcome;
+  Eigen::VectorXd q;  // model units
+  std::unique_ptr<Scenario> scenario;
+  std::unique_ptr<FitProblem> problem;
+};
+
+Fitted fit(const path& dir, const std::string& tracks) {
+  Fitted f;
+  test::write_text(dir / "fit.yaml", bar(kStart, tracks, kFitSection));
+  f.scenario = std::make_unique<Scenario>(load_scenario((dir / "fit.yaml").string()));
+  f.problem = std::make_unique<FitProblem>(*f.scenario, f.scenario->fit.parameters);
+  FitOptions o;
+  o.max_evaluations = f.scenario->fit.max_evaluations;
+  o.ftol_rel = f.scenario->fit.ftol_rel;
+  o.xtol_rel = f.scenario->fit.xtol_rel;
+  f.outcome = run_fit(*f.problem, f.problem->map().initial(), o);
+  f.q.resize(f.problem->map().size());
+  for (int j = 0; j < f.q.size(); ++j) f.q[j] = f.problem->map().value(f.outcome.p, j);
+  return f;
+}
+
+void expect_recovered(const Fitted& f, double tolerance) {
+  ASSERT_EQ(f.q.size(), 3);
+  for (int j = 0; j < 3; ++j)
+    EXPECT_NEAR(f.q[j] / kTrue[j], 1.0, tolerance)
+        << f.problem->map().label(j) << " fitted " << f.q[j] << " true " << kTrue[j] << " after "
+        << f.outcome.evaluations << " evaluations (" << f.outcome.stop_reason << ")";
+}
+
+TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
+  const path dir = test::scratch("fit-noise-free");
+  const Fitted f = fit(dir, test::simulate_tracks(dir, "truth", bar(kTruth)));
+  expect_recovered(f, 1e-3);
+  EXPECT_LT(f.outcome.best.rms, 1e-6);  // metres: the truth is in the model class
+  EXPECT_EQ(f.outcome.failures, 0);
+}
+
+TEST(Fit, OccludedBurstsStillRecoverTheParameters) {
+  const path dir = test::scratch("fit-occluded");
+  const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(kTruth)),
+                                            dir / "occluded.csv", 0.0, 0.2, 5, 7);
+  const MarkerTracks t = read_marker_tracks(tracks);
+  const double missing = t.xyz.array().isNaN().cast<double>().sum() / t.xyz.size();
+  EXPECT_NEAR(missing, 0.2, 0.02);
+  expect_recovered(fit(dir, tracks), 1e-3);
+}
+
+TEST(Fit, MarkerNoiseGivesRmsAtTheNoiseLevelAndHonestStandardErrors) {
+  const double sigma = 1e-3;
+  const path dir = test::scratch("fit-noise");
+  const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(kTruth)),
+                                            dir / "noisy.csv", sigma, 0.0, 1, 11);
+  const Fitted f = fit(dir, tracks);
+  const ParameterUncertainty u = gauss_newton_uncertainty(*f.problem, f.outcome.p);
+  ASSERT_TRUE(u.ok) << u.error;
+  // Residuals at the capture frames: per coordinate, the noise level.
+  EXPECT_NEAR(u.sigma / sigma, 1.0, 0.1);
+  // The continuous RMS distance of Φ interpolates the noise linearly between frames:
+  // E‖r‖² = 3σ² · ∫₀¹ (1−s)² + s² ds = 2σ², so RMS = √2 σ.
+  EXPECT_NEAR(f.outcome.best.rms / (std::sqrt(2.0) * sigma), 1.0, 0.1);
+  for (int j = 0; j < 3; ++j) {
+    const double z = (f.q[j] - kTrue[j]) / u.std_error[j];
+    EXPECT_LT(std::abs(z), 3.0) << f.problem->map().label(j) << " fitted " << f.q[j] << " ± "
+                                << u.std_error[j] << " true " << kTrue[j];
+  }
+}
+
+}  // namespace
+}  // namespace kelvin
+
+namespace kelvin {
+namespace {
+
+/// A short fit for the command line: 0.05 s of the bar, μ and ν from 2× off.
+test::fs::path cli_scenario(const std::string& name) {
+  const path dir = test::scratch(name);
+  std::string truth = bar(kTruth);
+  const auto shorten = [](std::string yaml) {
+    return yaml.replace(yaml.find("end: 0.2"), 8, "end: 0.05");
+  };
+  const std::string tracks = test::simulate_tracks(dir, "truth", shorten(truth));
+  test::write_text(dir / "fit.yaml",
+                   shorten(bar(kStart, tracks,
+                               "fit: { parameters: [elastic.mu, viscous.nu], max_evaluations: 3 "
+                               "}\n")));
+  return dir;
+}
+
+int history_rows(const path& file) {
+  const std::string text = test::read_text(file);
+  return static_cast<int>(std::count(text.begin(), text.end(), '\n')) - 1;
+}
+
+TEST(FitCli, WritesOutputsResumesAndTheFittedScenarioRuns) {
+  const path dir = cli_scenario("fit-cli");
+  const std::string out = (dir / "out").string();
+  const auto first = test::run_kelvin("fit " + (dir / "fit.yaml").string() + " -o " + out);
+  ASSERT_EQ(first.exit_code, 0) << first.out;
+  EXPECT_NE(first.out.find("report: " + out + "/report.md"), std::string::npos) << first.out;
+  for (const char* f : {"fitted.yaml", "history.csv", "fit-state.yaml", "marker-rms.csv",
+                        "report.md", "objective.svg", "track-1.svg"})
+    EXPECT_TRUE(test::fs::exists(dir / "out" / f)) << f;
+  EXPECT_EQ(history_rows(dir / "out" / "history.csv"), 3);
+
+  // --resume continues the numbering up to the new budget.
+  const auto resumed = test::run_kelvin("fit " + (dir / "fit.yaml").string() + " -o " + out +
+                                        " --resume --max-evaluations 5");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.out;
+  EXPECT_EQ(history_rows(dir / "out" / "history.csv"), 5);
+  EXPECT_NE(test::read_text(dir / "out" / "history.csv").find("\n5,"), std::string::npos);
+
+  const auto sim = test::run_kelvin("simulate " + out + "/fitted.yaml -q -o " + out + "/sim");
+  EXPECT_EQ(sim.exit_code, 0) << sim.out;
+}
+
+TEST(FitCli, InterruptWritesTheBestSoFarAndSaysHowToResume) {
+  const path dir = cli_scenario("fit-interrupt");
+  const std::string out = (dir / "out").string();
+  // Interrupt once the first evaluation is in the history.
+  const std::string script = std::string(KELVIN_BINARY) + " fit " + (dir / "fit.yaml").string() +
+                             " -o " + out + " --max-evaluations 50 > " + out +
+                             ".log 2>&1 & pid=$!; while [ ! -s " + out +
+                             "/fit-state.yaml ]; do sleep 0.05; done; kill -INT $pid; wait $pid";
+  const int status = std::system(("bash -c '" + script + "'").c_str());
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  EXPECT_TRUE(test::fs::exists(dir / "out" / "fitted.yaml"));
+  EXPECT_TRUE(test::fs::exists(dir / "out" / "report.md"));
+  EXPECT_NE(test::read_text(out + ".log").find("--resume"), std::string::npos);
+  EXPECT_LT(history_rows(dir / "out" / "history.csv"), 50);
+}
+
+}  // namespace
+}  // namespace kelvin
