@@ -193,20 +193,38 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
 
   std::vector<double> x(p0.data(), p0.data() + n);
   for (int j = 0; j < n; ++j) x[j] = std::clamp(x[j], lo[j], hi[j]);
-  double value = 0;
-  try {
-    c.outcome.stop_reason = describe(opt.optimize(x, value));
-  } catch (const nlopt::roundoff_limited&) {
-    c.outcome.stop_reason = "converged: no further progress possible at the objective's accuracy";
-  } catch (const nlopt::forced_stop&) {
-    c.outcome.stop_reason = c.outcome.interrupted ? "interrupted"
-                            : c.budget_spent      ? describe(nlopt::MAXEVAL_REACHED)
-                                                  : "stopped";
-  } catch (const std::runtime_error& e) {
+  // L-BFGS's line search gives up (NLopt "failure", round-off) when its curvature
+  // pairs go stale, e.g. after backing off from a failed simulation. A restart from
+  // the best point with a fresh memory usually goes on; restarts continue while they
+  // still improve the best and budget remains.
+  constexpr int kMaxRestarts = 5;
+  for (int restart = 0;; ++restart) {
+    const double best_before = c.outcome.best.objective;
+    bool gave_up = false;
+    double value = 0;
+    try {
+      c.outcome.stop_reason = describe(opt.optimize(x, value));
+    } catch (const nlopt::roundoff_limited&) {
+      c.outcome.stop_reason = "converged: no further progress possible at the objective's accuracy";
+      gave_up = true;
+    } catch (const nlopt::forced_stop&) {
+      c.outcome.stop_reason = c.outcome.interrupted ? "interrupted"
+                              : c.budget_spent      ? describe(nlopt::MAXEVAL_REACHED)
+                                                    : "stopped";
+    } catch (const std::runtime_error& e) {
+      if (c.error) std::rethrow_exception(c.error);
+      c.outcome.stop_reason = fmt::format("optimiser failure: {}", e.what());
+      gave_up = true;
+    }
     if (c.error) std::rethrow_exception(c.error);
-    c.outcome.stop_reason = fmt::format("optimiser failure: {}", e.what());
+    const bool improved = restart == 0 || c.outcome.best.objective < best_before;
+    const int left = budget - c.outcome.evaluations;
+    if (!gave_up || !improved || left <= 0 || restart >= kMaxRestarts ||
+        c.outcome.best.evaluation == 0)
+      break;
+    x.assign(c.outcome.p.data(), c.outcome.p.data() + n);
+    opt.set_maxeval(left);
   }
-  if (c.error) std::rethrow_exception(c.error);
   if (c.outcome.best.evaluation == 0) c.outcome.p = p0;
   return c.outcome;
 }
