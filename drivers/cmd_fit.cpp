@@ -139,7 +139,6 @@ int run(const FitArgs& args) {
   session.evaluations = state.evaluations;
   session.failures = state.failures;
   session.seconds = state.seconds;
-  if (session.best.size() == 0) session.best = state.best;
   if (!args.quiet)
     fmt::print("{} after {} evaluations ({} failed simulations){}\n", session.stop_reason,
                state.evaluations, state.failures,

@@ -98,7 +98,6 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       // algorithm's bookkeeping sane while the line search backs off.
       r.error = ev.error;
       r.objective = kFailedObjective;
-      g.setZero();
       ++c.outcome.failures;
     }
     ++c.outcome.evaluations;

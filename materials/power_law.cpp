@@ -37,11 +37,12 @@ struct Kinematics {
 bool evaluate_viscous(const MaterialPoint& in, unsigned request, MaterialResponse& out,
                       bool power_law) {
   const int nq = power_law ? 2 : 1;
-  if (!(in.F.determinant() > 0)) return false;
   const double nu = in.q[0], h = power_law ? in.q[1] : 1.0;
-  const Mat3 L = in.Fdot * in.F.inverse();
+  // One determinant and one inverse per call: this runs per element per residual.
+  const Kinematics k(in.F, in.Fdot, nu, h, power_law);
+  if (!(k.J > 0)) return false;
   if (request & kEnergy) out.energy = 0;
-  if (!(L.norm() > DBL_MIN)) {
+  if (!(k.L.norm() > DBL_MIN)) {
     // At rest the power law contributes nothing (DESIGN.md), including its derivatives.
     if (request & kStress) out.P.setZero();
     if (request & kTangent) out.dPdF.setZero();
@@ -49,7 +50,6 @@ bool evaluate_viscous(const MaterialPoint& in, unsigned request, MaterialRespons
     if (request & kParamDerivative) out.dPdq.setZero(9, nq);
     return true;
   }
-  const Kinematics k(in.F, in.Fdot, nu, h, power_law);
   if (request & kStress) out.P = k.P;
   if (request & kParamDerivative) {
     out.dPdq.resize(9, nq);
