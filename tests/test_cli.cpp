@@ -9,28 +9,16 @@
 #include <string>
 
 #include "engine/csv.hpp"
+#include "test_support.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct CliRun {
-  int exit_code = -1;
-  std::string out;  // stdout and stderr together
-};
+using kelvin::test::CliRun;
+using kelvin::test::run_kelvin;
 
-CliRun run_kelvin(const std::string& args) {
-  const std::string cmd = std::string(KELVIN_BINARY) + " " + args + " 2>&1";
-  CliRun r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (size_t n = fread(buf, 1, sizeof buf, p)) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
-}
-
+/// The output directory of a run, removed but not created: kelvin creates it.
 fs::path scratch(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("kelvin_test_cli_" + name);
   fs::remove_all(dir);

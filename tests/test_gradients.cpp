@@ -10,6 +10,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/gradient_check.hpp"
 #include "engine/simulation.hpp"
+#include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
@@ -17,28 +18,12 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// A 60 × 20 × 20 mm bar (144 tets) clamped at x = 0, shaken along y and z, hanging
-/// under gravity from a static initial state; two markers.
+/// The shaken bar of test_support.hpp, two markers, sampled at 200 Hz.
 std::string bar_yaml(const std::string& material, const std::string& extra = "") {
-  return R"(
-name: bar
-mesh: { generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }
-material:
-)" + material +
-         R"(
-gravity: [0, 0, -9.81]
-initial: static
-clamps:
-  - name: base
-    select: { plane: { axis: x, at: 0 } }
-    motion:
-      sinusoids:
-        translation:
-          - { amplitude: 0.003, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }
-          - { amplitude: 0.002, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }
-time: { end: 0.1, output_rate: 200 }
-solver: { rtol: 1.0e-9, atol: 1.0e-13 }
-)" + extra;
+  test::ShakenBar bar;
+  bar.material = material.substr(1);  // the constants below start with a newline
+  bar.tail = extra;
+  return test::shaken_bar_yaml(bar);
 }
 
 const std::string kMarkers = R"(
@@ -66,14 +51,11 @@ const std::string kStartRayleigh = R"(
   viscous: { model: rayleigh, alpha0: 3.0, alpha1: 0.7e-3 })";
 
 fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("kelvin-gradients-" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  return test::scratch("gradients-" + name);
 }
 
 void write(const fs::path& path, const std::string& text) {
-  std::ofstream(path) << text;
+  test::write_text(path, text);
 }
 
 /// Simulates the truth and returns the path of its marker tracks.

@@ -14,6 +14,7 @@
 #include "adjoint/marker_trajectory.hpp"
 #include "adjoint/uncertainty.hpp"
 #include "engine/simulation.hpp"
+#include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
@@ -21,29 +22,13 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// The bar of test_gradients (144 tets, clamped at x = 0, shaken, hanging from a
-/// static state) with five markers sampled at 1 kHz: enough coordinates (~10³)
-/// that σ̂ is within a few per cent of σ for any noise draw.
+/// The shaken bar of test_support.hpp with five markers sampled at 1 kHz: enough
+/// coordinates (~10³) that σ̂ is within a few per cent of σ for any noise draw.
 std::string bar_yaml(const std::string& material, const std::string& observed) {
-  return R"(
-name: bar
-mesh: { generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }
-material:
-)" + material +
-         R"(
-gravity: [0, 0, -9.81]
-initial: static
-clamps:
-  - name: base
-    select: { plane: { axis: x, at: 0 } }
-    motion:
-      sinusoids:
-        translation:
-          - { amplitude: 0.003, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }
-          - { amplitude: 0.002, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }
-time: { end: 0.1, output_rate: 1000 }
-solver: { rtol: 1.0e-9, atol: 1.0e-13 }
-markers:
+  test::ShakenBar bar;
+  bar.material = material.substr(1);  // the constants below start with a newline
+  bar.output_rate = 1000;
+  bar.tail = R"(markers:
   rest:
     - { name: tip, at: [0.06, 0.01, 0.01] }
     - { name: mid, at: [0.03, 0.01, 0.02] }
@@ -51,6 +36,7 @@ markers:
     - { name: side, at: [0.045, 0.02, 0.01] }
     - { name: root, at: [0.005, 0.01, 0.01] }
 )" + observed;
+  return test::shaken_bar_yaml(bar);
 }
 
 const std::string kTruth = R"(

@@ -1,6 +1,7 @@
 #pragma once
 // Helpers shared by the tests: scratch directories, text files, running the
 // kelvin binary, and simulating "captured" marker tracks with known parameters.
+#include <fmt/format.h>
 #include <sys/wait.h>
 
 #include <cstdio>
@@ -48,6 +49,44 @@ inline CliRun run_kelvin(const std::string& args) {
   const int status = pclose(p);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   return r;
+}
+
+/// The synthetic specimen of the gradient and fit tests: a 60 × 20 × 20 mm bar
+/// (144 tets) clamped at x = 0 and shaken by two sinusoids (17 Hz along y, 13 Hz
+/// along z, starting at rest), hanging under gravity from a static initial state.
+/// `material` is the indented body of the material section; `tail` follows the
+/// solver section (markers, fit, ...).
+struct ShakenBar {
+  std::string name = "bar";
+  std::string material;
+  double amplitude_y = 0.003, amplitude_z = 0.002;  // m
+  double end = 0.1, output_rate = 200;              // s, Hz
+  double rtol = 1e-9, atol = 1e-13;
+  std::string tail;
+};
+
+inline std::string shaken_bar_yaml(const ShakenBar& b) {
+  return fmt::format(R"(
+name: {}
+mesh: {{ generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }}
+material:
+{}
+gravity: [0, 0, -9.81]
+initial: static
+clamps:
+  - name: base
+    select: {{ plane: {{ axis: x, at: 0 }} }}
+    motion:
+      sinusoids:
+        translation:
+          - {{ amplitude: {}, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }}
+          - {{ amplitude: {}, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }}
+time: {{ end: {}, output_rate: {} }}
+solver: {{ rtol: {}, atol: {} }}
+)",
+                     b.name, b.material, b.amplitude_y, b.amplitude_z, b.end, b.output_rate, b.rtol,
+                     b.atol) +
+         b.tail;
 }
 
 /// Simulates the scenario file `yaml` (written to dir/name.yaml) and returns the
