@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "engine/csv.hpp"
 #include "engine/error.hpp"
 #include "engine/output.hpp"
 
@@ -16,14 +17,6 @@ namespace {
 // 17 significant digits: the state and history must reproduce p exactly.
 std::string exact(double v) {
   return fmt::format("{:.17g}", v);
-}
-
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string cell;
-  while (std::getline(ss, cell, ',')) out.push_back(cell);
-  return out;
 }
 
 }  // namespace
@@ -51,7 +44,7 @@ void FitHistoryFile::load_existing() {
   while (std::getline(in, line)) {
     ++number;
     if (line.empty()) continue;
-    const auto cells = split(line);
+    const auto cells = split_csv_line(line);
     if (cells.size() < 10)
       throw Error(fmt::format("{}: line {}: expected at least 10 columns", path_, number));
     FitRecord r;

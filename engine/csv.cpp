@@ -13,11 +13,10 @@
 #include "engine/error.hpp"
 
 namespace kelvin {
-namespace {
 
 /// Lines of a CSV file with their 1-based numbers; blank and '#' lines dropped,
 /// CR of CRLF endings removed.
-std::vector<std::pair<int, std::string>> read_lines(const std::string& path) {
+std::vector<std::pair<int, std::string>> read_csv_lines(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw Error(fmt::format("{}: cannot open ({})", path, std::strerror(errno)));
   std::vector<std::pair<int, std::string>> lines;
@@ -31,7 +30,7 @@ std::vector<std::pair<int, std::string>> read_lines(const std::string& path) {
   return lines;
 }
 
-std::vector<std::string> split(const std::string& line) {
+std::vector<std::string> split_csv_line(const std::string& line) {
   std::vector<std::string> cells;
   size_t start = 0;
   for (;;) {
@@ -45,7 +44,7 @@ std::vector<std::string> split(const std::string& line) {
   }
 }
 
-bool parse_number(const std::string& s, double& v) {
+bool parse_csv_number(const std::string& s, double& v) {
   if (s.empty()) return false;
   char* end = nullptr;
   // Underflow yields a usable denormal or zero; overflow gives ±inf, which the callers
@@ -54,18 +53,20 @@ bool parse_number(const std::string& s, double& v) {
   return end != s.c_str() && *end == '\0';
 }
 
+namespace {
+
 /// A header is recognised only when none of its value cells is a number, so that a
 /// first data row with one bad cell is reported instead of being skipped silently.
 bool is_header_row(const std::vector<std::string>& cells, size_t from) {
   double v;
   for (size_t k = from; k < cells.size(); ++k)
-    if (parse_number(cells[k], v)) return false;
+    if (parse_csv_number(cells[k], v)) return false;
   return true;
 }
 
 double number(const std::string& path, int line, const std::string& cell, const char* what) {
   double v;
-  if (!parse_number(cell, v) || !std::isfinite(v))
+  if (!parse_csv_number(cell, v) || !std::isfinite(v))
     throw Error(fmt::format("{}:{}: {} '{}' is not a finite number", path, line, what, cell));
   return v;
 }
@@ -77,8 +78,8 @@ MarkerRest read_marker_rest(const std::string& path) {
   std::vector<Eigen::Vector3d> pos;
   std::set<std::string> seen;
   bool first = true;
-  for (const auto& [n, line] : read_lines(path)) {
-    const auto cells = split(line);
+  for (const auto& [n, line] : read_csv_lines(path)) {
+    const auto cells = split_csv_line(line);
     if (cells.size() != 4)
       throw Error(
           fmt::format("{}:{}: expected 4 columns name,x,y,z, found {}", path, n, cells.size()));
@@ -101,9 +102,9 @@ MarkerRest read_marker_rest(const std::string& path) {
 }
 
 MarkerTracks read_marker_tracks(const std::string& path) {
-  const auto lines = read_lines(path);
+  const auto lines = read_csv_lines(path);
   if (lines.empty()) throw Error(path + ": empty file (expected a header t,<name>_x,<name>_y,...)");
-  const auto header = split(lines[0].second);
+  const auto header = split_csv_line(lines[0].second);
   const int hn = lines[0].first;
   if (header[0] != "t" || (header.size() - 1) % 3 != 0)
     throw Error(fmt::format(
@@ -128,7 +129,7 @@ MarkerTracks read_marker_tracks(const std::string& path) {
   std::vector<std::vector<double>> rows;
   for (size_t r = 1; r < lines.size(); ++r) {
     const auto& [n, line] = lines[r];
-    const auto cells = split(line);
+    const auto cells = split_csv_line(line);
     if (static_cast<int>(cells.size()) != cols)
       throw Error(fmt::format("{}:{}: {} columns, the header has {}", path, n, cells.size(), cols));
     std::vector<double> row(cols);
@@ -140,7 +141,7 @@ MarkerTracks read_marker_tracks(const std::string& path) {
       double v;
       if (cells[k].empty())
         v = std::numeric_limits<double>::quiet_NaN();  // occluded
-      else if (!parse_number(cells[k], v) || std::isinf(v))
+      else if (!parse_csv_number(cells[k], v) || std::isinf(v))
         throw Error(fmt::format("{}:{}: column {} ({}) '{}' is not a number", path, n, k + 1,
                                 header[k], cells[k]));
       row[k] = v;
@@ -158,8 +159,8 @@ MarkerTracks read_marker_tracks(const std::string& path) {
 ClampSamples read_clamp_csv(const std::string& path) {
   ClampSamples out;
   bool first = true;
-  for (const auto& [n, line] : read_lines(path)) {
-    const auto cells = split(line);
+  for (const auto& [n, line] : read_csv_lines(path)) {
+    const auto cells = split_csv_line(line);
     if (cells.size() != 8)
       throw Error(fmt::format("{}:{}: expected 8 columns t,tx,ty,tz,qw,qx,qy,qz, found {}", path, n,
                               cells.size()));

@@ -2,9 +2,18 @@
 // Readers for the CSV formats of DESIGN.md. Errors name the file and 1-based line.
 #include <Eigen/Core>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace kelvin {
+
+/// Content lines of a CSV file with their 1-based numbers: blank and '#' lines
+/// dropped, CR of CRLF endings removed. Throws kelvin::Error when unreadable.
+std::vector<std::pair<int, std::string>> read_csv_lines(const std::string& path);
+/// Comma-separated cells, each trimmed of spaces and tabs.
+std::vector<std::string> split_csv_line(const std::string& line);
+/// The whole cell as a number (strtod); false for an empty or partly numeric cell.
+bool parse_csv_number(const std::string& cell, double& value);
 
 struct MarkerRest {
   std::vector<std::string> names;

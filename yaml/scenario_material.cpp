@@ -9,6 +9,7 @@
 #include <fstream>
 #include <map>
 
+#include "engine/csv.hpp"
 #include "engine/error.hpp"
 #include "materials/material.hpp"
 #include "yaml/scenario_sections.hpp"
@@ -175,31 +176,12 @@ struct FieldsTable {
   std::vector<Row> rows;
 };
 
-std::vector<std::string> split_cells(const std::string& line) {
-  std::vector<std::string> cells;
-  size_t start = 0;
-  for (;;) {
-    const size_t comma = line.find(',', start);
-    std::string cell = line.substr(start, comma == std::string::npos ? comma : comma - start);
-    const auto a = cell.find_first_not_of(" \t"), b = cell.find_last_not_of(" \t");
-    cells.push_back(a == std::string::npos ? "" : cell.substr(a, b - a + 1));
-    if (comma == std::string::npos) return cells;
-    start = comma + 1;
-  }
-}
-
 FieldsTable read_fields_table(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw Error(fmt::format("{}: cannot open", path));
   FieldsTable t;
   t.path = path;
   std::map<int, int> line_of;  // element → line of its row
-  std::string line;
-  for (int n = 1; std::getline(in, line); ++n) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    const auto first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] == '#') continue;
-    auto cells = split_cells(line);
+  for (const auto& [n, line] : read_csv_lines(path)) {
+    auto cells = split_csv_line(line);
     if (t.header_line == 0) {
       if (cells[0] != "element" || cells.size() < 2)
         throw Error(
@@ -227,8 +209,8 @@ FieldsTable read_fields_table(const std::string& path) {
       throw Error(fmt::format("{}:{}: element {} appears twice (first on line {})", path, n,
                               row.element, it->second));
     for (size_t k = 1; k < cells.size(); ++k) {
-      const double v = std::strtod(cells[k].c_str(), &end);
-      if (cells[k].empty() || *end != '\0' || !std::isfinite(v))
+      double v = 0;
+      if (!parse_csv_number(cells[k], v) || !std::isfinite(v))
         throw Error(fmt::format("{}:{}: column {} ({}) '{}' is not a finite number", path, n, k + 1,
                                 t.targets[k - 1], cells[k]));
       row.values.push_back(v);
