@@ -19,21 +19,18 @@ struct Kinematics {
     c = power_law ? nu * std::pow(gamma, h - 1) : nu;
     P = (J * c) * d * FinvT;
   }
-  /// dP for a change dL of the velocity gradient, dJ of J and dF⁻ᵀ of F⁻ᵀ.
-  Mat3 differential(const Mat3& dL, double dJ, const Mat3& dFinvT, double h, bool power_law) const {
-    const Mat3 dd = dL + dL.transpose();
-    // dγ̇/γ̇ = d:dL / γ̇² (d symmetric), so dc = c (h−1) d:dL / γ̇².
-    const double dc = power_law ? c * (h - 1) * d.cwiseProduct(dL).sum() / (gamma * gamma) : 0.0;
-    return (dJ * c + J * dc) * d * FinvT + (J * c) * (dd * FinvT + d * dFinvT);
-  }
   double J;
   Mat3 FinvT, L, d, P;
   double gamma = 0, c = 0;
 };
 
-/// P and, on request, its closed-form derivatives: one 3×3 differential per
-/// entry of F and of Ḟ (a fraction of the cost of automatic differentiation,
-/// and these run once per element per residual in every backward adjoint step).
+/// P and, on request, its closed-form derivatives. With A = F⁻¹, M = d Aᵀ (so
+/// P = J c M), S = A Aᵀ and w = (h−1)/γ̇², for the unit change of entry (i, j):
+///   dP/dḞᵢⱼ = J c [wMᵢⱼ M + eᵢ Sⱼᵀ + aⱼ Aᵢᵀ],
+///   dP/dFᵢⱼ = J c [(Aⱼᵢ − w (A d L)ⱼᵢ) M − Lᵢ Sⱼᵀ − aⱼ (A L)ᵢᵀ − Mⱼ Aᵢᵀ],
+/// where Xᵢ is column i of X and aⱼ row j of A (from dL = dḞ A, dA = −A dF A,
+/// dJ = J Aⱼᵢ and dc = c w d:dL). Each entry is a few outer products of 3-vectors:
+/// these run for every element at every backward adjoint step.
 bool evaluate_viscous(const MaterialPoint& in, unsigned request, MaterialResponse& out,
                       bool power_law) {
   const int nq = power_law ? 2 : 1;
@@ -58,21 +55,29 @@ bool evaluate_viscous(const MaterialPoint& in, unsigned request, MaterialRespons
       out.dPdq.col(1) =
           Eigen::Map<const Eigen::Matrix<double, 9, 1>>((k.P * std::log(k.gamma)).eval().data());
   }
-  const Mat3 Finv = k.FinvT.transpose();
-  for (int e = 0; e < 9; ++e) {
-    Mat3 E = Mat3::Zero();
-    E(e % 3, e / 3) = 1;
-    if (request & kRateTangent) {
-      const Mat3 dP = k.differential(E * Finv, 0, Mat3::Zero(), h, power_law);
-      out.dPdFdot.col(e) = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(dP.data());
+  if (!(request & (kTangent | kRateTangent))) return true;
+  const Mat3 A = k.FinvT.transpose();
+  const Mat3 M = k.d * k.FinvT;
+  const Mat3 S = A * A.transpose();
+  const double Jc = k.J * k.c;
+  const double w = power_law ? (h - 1) / (k.gamma * k.gamma) : 0.0;
+  const Mat3 AL = A * k.L, Q = A * k.d * k.L;
+  Mat3 dP;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      const int e = i + 3 * j;
+      if (request & kRateTangent) {
+        dP.noalias() = (w * M(i, j)) * M + A.row(j).transpose() * A.col(i).transpose();
+        dP.row(i) += S.col(j).transpose();
+        out.dPdFdot.col(e) = Jc * dP.reshaped();
+      }
+      if (request & kTangent) {
+        dP.noalias() = (A(j, i) - w * Q(j, i)) * M - k.L.col(i) * S.col(j).transpose() -
+                       A.row(j).transpose() * AL.col(i).transpose() -
+                       M.col(j) * A.col(i).transpose();
+        out.dPdF.col(e) = Jc * dP.reshaped();
+      }
     }
-    if (request & kTangent) {
-      // dJ = J F⁻ᵀ:dF, dL = −L dF F⁻¹, dF⁻ᵀ = −F⁻ᵀ dFᵀ F⁻ᵀ.
-      const Mat3 dP = k.differential(-k.L * E * Finv, k.J * k.FinvT(e % 3, e / 3),
-                                     -k.FinvT * E.transpose() * k.FinvT, h, power_law);
-      out.dPdF.col(e) = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(dP.data());
-    }
-  }
   return true;
 }
 
