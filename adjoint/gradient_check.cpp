@@ -1,5 +1,6 @@
 #include "adjoint/gradient_check.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -13,16 +14,21 @@ double relative_error(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return scale > 0 ? (a - b).lpNorm<Eigen::Infinity>() / scale : 0.0;
 }
 
-/// Least-squares slope of log r against log h.
-double loglog_slope(const std::vector<double>& h, const std::vector<double>& r) {
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  int m = 0;
-  for (size_t i = 0; i < h.size(); ++i) {
-    if (!(r[i] > 0)) continue;
-    const double x = std::log(h[i]), y = std::log(r[i]);
-    sx += x, sy += y, sxx += x * x, sxy += x * y, ++m;
-  }
-  return m >= 2 ? (m * sxy - sx * sy) / (m * sxx - sx * sx) : NAN;
+/// The median of the rates log(r_k/r_{k+1}) / log(h_k/h_{k+1}) between consecutive
+/// steps. A least-squares line through all levels is pulled below 2 by the h³ term
+/// at the largest steps and by the integration noise of Φ at the smallest (on the
+/// test bar the rates ran 1.78, 1.90, …, 2.00 for one direction and 2.00, …, 1.92,
+/// 1.47 for another); the median reads the asymptotic regime between them, and a
+/// wrong gradient still gives ≈ 1 at every level.
+double median_rate(const std::vector<double>& h, const std::vector<double>& r) {
+  std::vector<double> rates;
+  for (size_t i = 0; i + 1 < h.size(); ++i)
+    if (r[i] > 0 && r[i + 1] > 0)
+      rates.push_back(std::log(r[i] / r[i + 1]) / std::log(h[i] / h[i + 1]));
+  if (rates.empty()) return NAN;
+  std::sort(rates.begin(), rates.end());
+  const size_t m = rates.size();
+  return m % 2 ? rates[m / 2] : 0.5 * (rates[m / 2 - 1] + rates[m / 2]);
 }
 
 }  // namespace
@@ -99,7 +105,7 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
       rep.remainder.push_back(
           std::abs(phi(p + h * rep.direction) - rep.phi - h * rep.directional_adjoint));
     }
-    rep.slope = loglog_slope(rep.h, rep.remainder);
+    rep.slope = median_rate(rep.h, rep.remainder);
     rep.ok = true;
   } catch (const Error& e) {
     rep.error = e.what();

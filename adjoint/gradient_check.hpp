@@ -3,7 +3,8 @@
 /// Three-way check of dΦ/dp: adjoint, forward sensitivities and central finite
 /// differences, plus a Taylor test along a random direction δ:
 ///   r(h) = |Φ(p + hδ) − Φ(p) − h ∇Φ·δ| = O(h²),
-/// whose log–log slope must be ≈ 2 when the gradient is right (≈ 1 when it is not).
+/// whose rate (median of the rates between consecutive h) must be ≈ 2 when the
+/// gradient is right (≈ 1 when it is not).
 #include <Eigen/Core>
 #include <vector>
 
@@ -17,7 +18,7 @@ struct GradientCheckOptions {
   int max_parameters = 12;      // per-parameter differences only for this many entries
   bool forward = true;          // also run forward sensitivities
   double taylor_h0 = 1.0 / 32;  // first Taylor step; halved taylor_levels − 1 times
-  int taylor_levels = 6;
+  int taylor_levels = 7;
   GradientOptions adjoint;  // method is forced to adjoint
 };
 
@@ -30,7 +31,7 @@ struct GradientCheckReport {
   Eigen::VectorXd direction;
   double directional_adjoint = 0, directional_forward = 0, directional_fd = 0;
   std::vector<double> h, remainder;
-  double slope = 0;
+  double slope = 0;                                  // median rate of the remainders
   double adjoint_vs_forward = 0, adjoint_vs_fd = 0;  // relative errors (∞-norms)
   double seconds_forward_only = 0, seconds_adjoint = 0, seconds_forward_sensitivities = 0;
 };

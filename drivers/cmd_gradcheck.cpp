@@ -97,9 +97,13 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
                r.forward.size() ? fmt::format("{:.9g}", r.directional_forward) : "-",
                r.directional_fd);
     fmt::print("Taylor test |Φ(p+hδ) − Φ(p) − h∇Φ·δ|:\n");
-    for (size_t k = 0; k < r.h.size(); ++k)
-      fmt::print("  h = 2^{:<3.0f} remainder {:.4e}\n", std::log2(r.h[k]), r.remainder[k]);
-    fmt::print("fitted slope {:.3f} (2 for an exact gradient)\n", r.slope);
+    for (size_t k = 0; k < r.h.size(); ++k) {
+      fmt::print("  h = 2^{:<3.0f} remainder {:.4e}", std::log2(r.h[k]), r.remainder[k]);
+      if (k > 0 && r.remainder[k] > 0 && r.remainder[k - 1] > 0)
+        fmt::print("  rate {:.3f}", std::log2(r.remainder[k - 1] / r.remainder[k]));
+      fmt::print("\n");
+    }
+    fmt::print("median rate {:.3f} (2 for an exact gradient)\n", r.slope);
     fmt::print(
         "wall time: Φ alone {:.3g} s, Φ + adjoint gradient {:.3g} s ({:.2f}×){}\n",
         r.seconds_forward_only, r.seconds_adjoint, r.seconds_adjoint / r.seconds_forward_only,
@@ -115,7 +119,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
       failures.push_back(fmt::format("adjoint and finite differences differ by {:.2e} > {:.1e}",
                                      r.adjoint_vs_fd, args->fd_tolerance));
     if (!(r.slope >= 1.8 && r.slope <= 2.2))
-      failures.push_back(fmt::format("Taylor slope {:.3f} is not 2", r.slope));
+      failures.push_back(fmt::format("Taylor rate {:.3f} is not 2", r.slope));
     if (failures.empty()) {
       fmt::print("PASS: the gradient methods agree\n");
     } else {
