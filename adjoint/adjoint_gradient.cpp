@@ -29,19 +29,22 @@ namespace {
 struct Backward {
   ExperimentRun& run;
   int n;
-  DaeSystem dae;  // K, D at forward states (its own scratch; the forward pass keeps running)
+  DaeSystem dae;  // tangents at forward states (its own scratch; the forward pass keeps running)
   SchurSolver schur{dae};
   double cached_t = NAN;
   Eigen::VectorXd cached_y, gx;
+  mutable Eigen::VectorXd kt, dt;  // Kᵀλv, Dᵀλv
   Eigen::Matrix3Xd x, v;
   std::string fatal;
 
   explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model) {}
 
-  /// K, D and ∂g/∂x at the forward state (t, y), computed once per state.
+  /// Element tangents and ∂g/∂x at the forward state (t, y), computed once per
+  /// state: Newton iterations at one backward time reuse them, and K, D are
+  /// assembled from them only for a new Newton matrix.
   bool at(double t, const double* y) {
     if (t == cached_t && std::memcmp(cached_y.data(), y, sizeof(double) * 2 * n) == 0) return true;
-    if (!dae.stiffness_and_damping(t, y)) return false;
+    if (!dae.element_tangents(t, y)) return false;
     run.model.expand(t, y, nullptr, x, v);
     gx.setZero(n);
     run.objective.add_gradient(t, run.model, x, gx.data());
@@ -52,16 +55,12 @@ struct Backward {
 
   /// rB = [λx' − Kᵀλv + g_x ; M λv' + λx − Dᵀλv].
   void residual(const double* l, const double* lp, double* r) const {
-    const SparsePattern& P = run.model.pattern();
-    const AssemblyOutput& out = dae.last_assembly();
+    kt.resize(n);
+    dt.resize(n);
+    run.model.transpose_multiply(dae.tangents(), l + n, kt.data(), dt.data());
     for (int c = 0; c < n; ++c) {
-      double kt = 0, dt = 0;
-      for (int k = P.colptr[c]; k < P.colptr[c + 1]; ++k) {
-        kt += out.K[k] * l[n + P.rowind[k]];
-        dt += out.D[k] * l[n + P.rowind[k]];
-      }
-      r[c] = lp[c] - kt + gx[c];
-      r[n + c] = l[c] - dt;
+      r[c] = lp[c] - kt[c] + gx[c];
+      r[n + c] = l[c] - dt[c];
     }
     run.model.mass_multiply(lp + n, r + n);
   }
@@ -118,6 +117,7 @@ int jacobian_b(realtype t, realtype cjB, N_Vector y, N_Vector, N_Vector, N_Vecto
   Backward* b = backward_of(data);
   try {
     if (!b->at(t, N_VGetArrayPointer(y))) return 1;
+    b->dae.assemble_from_tangents();
     b->schur.assemble_from_last(-cjB);
     return 0;
   } catch (const std::exception& e) {
@@ -237,7 +237,8 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   const std::vector<double> T = run.boundaries();
   const int segments = static_cast<int>(T.size()) - 1;
   result.segments = segments;
-  const long nd = run.opt.checkpoint_steps > 0 ? run.opt.checkpoint_steps : kDefaultCheckpointSteps;
+  const long nd =
+      run.opt.checkpoint_steps > 0 ? run.opt.checkpoint_steps : default_checkpoint_steps(2 * n);
 
   // Pass 1 (only with several segments): Φ and the state at every boundary.
   std::vector<Eigen::VectorXd> xs{run.x0}, vs{run.v0};

@@ -181,14 +181,14 @@ int main(int argc, char** argv) {
   }
 
   if (memory) {
+    const Scenario s = with_observations(h, 100 * memory_base, dir + "/memory");
     fmt::print(
         "\npeak resident memory (MiB), h = {} mm, 4 global parameters, segments of {} s, "
-        "checkpoints every {} steps\n",
-        1e3 * h, segment, kDefaultCheckpointSteps);
+        "checkpoints every ≤ {} steps\n",
+        1e3 * h, segment, default_checkpoint_steps(6 * s.mesh.num_nodes()));
     fmt::print(
         "| duration (s) | steps | Φ alone | adjoint, one segment | adjoint, segments |\n"
         "|---|---|---|---|---|\n");
-    const Scenario s = with_observations(h, 100 * memory_base, dir + "/memory");
     for (double factor : {1.0, 10.0, 100.0}) {
       Scenario sc = s;
       sc.time.end = memory_base * factor;

@@ -27,6 +27,15 @@ bool DaeSystem::stiffness_and_damping(double t, const double* y) {
   return model_.assemble(x_, v_, req, out_);
 }
 
+bool DaeSystem::element_tangents(double t, const double* y) {
+  model_.expand(t, y, y + n_, x_, v_);
+  return model_.element_tangents(x_, v_, tangents_);
+}
+
+void DaeSystem::assemble_from_tangents() {
+  model_.assemble_tangents(tangents_, out_.K, out_.D);
+}
+
 bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {
   if (!stiffness_and_damping(t, y)) return false;
   const SparsePattern& P = model_.pattern();

@@ -31,6 +31,13 @@ class DaeSystem {
   /// Assembles K and D at y (into last_assembly()); the blocks of the Newton matrix
   /// that SchurSolver combines.
   bool stiffness_and_damping(double t, const double* y);
+  /// Element tangents at y (the adjoint's per-state cache); false when an element
+  /// is inadmissible (the failing element in tangents()).
+  bool element_tangents(double t, const double* y);
+  const ElementTangents& tangents() const { return tangents_; }
+  /// K and D into last_assembly() from tangents(), for SchurSolver.
+  void assemble_from_tangents();
+
   /// y' consistent with y at t: x' = v and v' = M⁻¹(f_ext − r(x, v) − M_fc a_c).
   bool consistent_derivative(double t, const double* y, double* yp);
 
@@ -46,6 +53,7 @@ class DaeSystem {
   Eigen::Matrix3Xd x_, v_;
   Eigen::VectorXd clamp_inertia_;
   AssemblyOutput out_;
+  ElementTangents tangents_;
   std::vector<double> mass_diagonal_;  // lumped mass per free dof
   std::shared_ptr<void> mass_factor_;  // consistent mass LDLᵀ, built on first use
 };

@@ -43,4 +43,12 @@ void accumulate_element_matrix(const TetElement& el, const Mat9& A, double scale
           s * (el.G(0, a) * T.row(i) + el.G(1, a) * T.row(i + 3) + el.G(2, a) * T.row(i + 6));
 }
 
+void element_transpose_product(const TetElement& el, const Mat9& A,
+                               const Eigen::Matrix<double, 3, 4>& lambda,
+                               Eigen::Matrix<double, 3, 4>& out) {
+  const Mat3 L = lambda * el.G.transpose();
+  const Eigen::Matrix<double, 9, 1> w = A.transpose() * L.reshaped();
+  out = el.volume * w.reshaped(3, 3) * el.G;
+}
+
 }  // namespace kelvin

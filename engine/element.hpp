@@ -26,4 +26,10 @@ TetElement make_tet_element(const Mesh& mesh, int e);
 void accumulate_element_matrix(const TetElement& el, const Mat9& A, double scale,
                                Eigen::Matrix<double, 12, 12>& out);
 
+/// out = (V Gᵀ A G)ᵀ λ_e as a 3×4 nodal field, without forming the 12×12 matrix:
+/// with Λ = λ_e Gᵀ, out = V W G where vec(W) = Aᵀ vec(Λ).
+void element_transpose_product(const TetElement& el, const Mat9& A,
+                               const Eigen::Matrix<double, 3, 4>& lambda,
+                               Eigen::Matrix<double, 3, 4>& out);
+
 }  // namespace kelvin

@@ -248,6 +248,51 @@ void FemModel::mass_multiply(const double* x, double* y) const {
       y[pattern_.rowind[k]] += mass_[k] * x[c];
 }
 
+bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                                unsigned request, ElementResponse& out) const {
+  const auto& el = elements_[e];
+  Eigen::Matrix<double, 3, 4> xe, ve;
+  for (int a = 0; a < 4; ++a) {
+    xe.col(a) = x.col(el.nodes[a]);
+    ve.col(a) = v.col(el.nodes[a]);
+  }
+  MaterialPoint mp;
+  mp.F = xe * el.G.transpose();
+  mp.Fdot = ve * el.G.transpose();
+  mp.element = e;
+  mp.rest_tangent = rest_tangent_.empty() ? nullptr : &rest_tangent_[e];
+  out.P.setZero();
+  out.mass_damping = 0;
+  out.energy = 0;
+  if (request & kTangent) out.dPdF.setZero();
+  if (request & kRateTangent) out.dPdFdot.setZero();
+  MaterialResponse resp;
+  for (const auto& term : terms_) {
+    const bool viscous = term.model->is_viscous();
+    unsigned r = request;
+    if (viscous)
+      r &= ~static_cast<unsigned>(kEnergy);
+    else
+      r &= ~static_cast<unsigned>(kRateTangent);
+    mp.q = term.q.col(e).data();
+    mp.state = term.state.size() ? term.state.col(e).data() : nullptr;
+    if (!term.model->evaluate(mp, r, resp)) {
+      out.det_F = mp.F.determinant();
+      return false;
+    }
+    out.P += resp.P;
+    if (const int k = term.model->mass_damping_param(); k >= 0) out.mass_damping += mp.q[k];
+    if (r & kTangent) out.dPdF += resp.dPdF;
+    if (r & kRateTangent) out.dPdFdot += resp.dPdFdot;
+    if (r & kEnergy) out.energy += resp.energy;
+  }
+  if (!out.P.allFinite()) {
+    out.det_F = mp.F.determinant();
+    return false;
+  }
+  return true;
+}
+
 bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                         const AssemblyRequest& req, AssemblyOutput& out) const {
   const int ne = mesh_.num_tets();
@@ -261,63 +306,28 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
   unsigned request = kStress;
   if (req.stiffness) request |= kTangent;
   if (req.damping) request |= kRateTangent;
+  if (req.energy) request |= kEnergy;
 
-  MaterialPoint mp;
-  MaterialResponse resp;
-  Eigen::Matrix<double, 3, 4> xe, ve;
-  Eigen::Matrix<double, 12, 12> Ke, De;
+  ElementResponse er;
+  Eigen::Matrix<double, 12, 12> Ke, De, Me;
   for (int e = 0; e < ne; ++e) {
     const auto& el = elements_[e];
-    for (int a = 0; a < 4; ++a) {
-      xe.col(a) = x.col(el.nodes[a]);
-      ve.col(a) = v.col(el.nodes[a]);
-    }
-    mp.F = xe * el.G.transpose();
-    mp.Fdot = ve * el.G.transpose();
-    mp.element = e;
-    mp.rest_tangent = rest_tangent_.empty() ? nullptr : &rest_tangent_[e];
-    Mat3 P = Mat3::Zero();
-    double mass_damping = 0;  // α of the α M v force, summed over terms
-    if (req.stiffness) Ke.setZero();
-    if (req.damping) De.setZero();
-    for (const auto& term : terms_) {
-      const bool viscous = term.model->is_viscous();
-      unsigned r = request;
-      if (viscous)
-        r &= ~static_cast<unsigned>(kEnergy);
-      else if (req.energy)
-        r |= kEnergy;
-      if (!viscous) r &= ~static_cast<unsigned>(kRateTangent);
-      mp.q = term.q.col(e).data();
-      mp.state = term.state.size() ? term.state.col(e).data() : nullptr;
-      if (!term.model->evaluate(mp, r, resp)) {
-        out.failed_element = e;
-        out.failed_det = mp.F.determinant();
-        return false;
-      }
-      P += resp.P;
-      if (const int k = term.model->mass_damping_param(); k >= 0) mass_damping += mp.q[k];
-      if (r & kTangent) accumulate_element_matrix(el, resp.dPdF, 1.0, Ke);
-      if (r & kRateTangent) accumulate_element_matrix(el, resp.dPdFdot, 1.0, De);
-      if (r & kEnergy) {
-        out.cell_energy[e] += resp.energy;
-        out.energy += el.volume * resp.energy;
-      }
-    }
-    if (!P.allFinite()) {
+    if (!evaluate_element(e, x, v, request, er)) {
       out.failed_element = e;
-      out.failed_det = mp.F.determinant();
+      out.failed_det = er.det_F;
       return false;
     }
-    Eigen::Matrix<double, 12, 12> Me;
-    if (mass_damping != 0) {
-      Me = element_mass(e);
-      if (req.damping) De += mass_damping * Me;
+    if (req.energy) {
+      out.cell_energy[e] = er.energy;
+      out.energy += el.volume * er.energy;
     }
+    if (er.mass_damping != 0) Me = element_mass(e);
     if (req.force) {
-      Eigen::Matrix<double, 3, 4> fe = el.volume * P * el.G;
-      if (mass_damping != 0) {
-        Eigen::Matrix<double, 12, 1> fm = mass_damping * Me * ve.reshaped();
+      Eigen::Matrix<double, 3, 4> fe = el.volume * er.P * el.G;
+      if (er.mass_damping != 0) {
+        Eigen::Matrix<double, 3, 4> ve;
+        for (int a = 0; a < 4; ++a) ve.col(a) = v.col(el.nodes[a]);
+        Eigen::Matrix<double, 12, 1> fm = er.mass_damping * Me * ve.reshaped();
         fe += fm.reshaped(3, 4);
       }
       for (int a = 0; a < 4; ++a)
@@ -327,14 +337,92 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
         }
     }
     const int* sc = &scatter_[static_cast<size_t>(e) * 144];
-    if (req.stiffness)
+    if (req.stiffness) {
+      Ke.setZero();
+      accumulate_element_matrix(el, er.dPdF, 1.0, Ke);
       for (int k = 0; k < 144; ++k)
         if (sc[k] >= 0) out.K[sc[k]] += Ke(k % 12, k / 12);
-    if (req.damping)
+    }
+    if (req.damping) {
+      De.setZero();
+      accumulate_element_matrix(el, er.dPdFdot, 1.0, De);
+      if (er.mass_damping != 0) De += er.mass_damping * Me;
       for (int k = 0; k < 144; ++k)
         if (sc[k] >= 0) out.D[sc[k]] += De(k % 12, k / 12);
+    }
   }
   return true;
+}
+
+bool FemModel::element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                                ElementTangents& out) const {
+  const int ne = mesh_.num_tets();
+  out.dPdF.resize(ne);
+  out.dPdFdot.resize(ne);
+  out.mass_damping.resize(ne);
+  out.failed_element = -1;
+  ElementResponse er;
+  for (int e = 0; e < ne; ++e) {
+    if (!evaluate_element(e, x, v, kStress | kTangent | kRateTangent, er)) {
+      out.failed_element = e;
+      out.failed_det = er.det_F;
+      return false;
+    }
+    out.dPdF[e] = er.dPdF;
+    out.dPdFdot[e] = er.dPdFdot;
+    out.mass_damping[e] = er.mass_damping;
+  }
+  return true;
+}
+
+void FemModel::assemble_tangents(const ElementTangents& t, std::vector<double>& K,
+                                 std::vector<double>& D) const {
+  K.assign(pattern_.nnz(), 0.0);
+  D.assign(pattern_.nnz(), 0.0);
+  Eigen::Matrix<double, 12, 12> Ke, De;
+  for (int e = 0; e < mesh_.num_tets(); ++e) {
+    const auto& el = elements_[e];
+    Ke.setZero();
+    De.setZero();
+    accumulate_element_matrix(el, t.dPdF[e], 1.0, Ke);
+    accumulate_element_matrix(el, t.dPdFdot[e], 1.0, De);
+    if (t.mass_damping[e] != 0) De += t.mass_damping[e] * element_mass(e);
+    const int* sc = &scatter_[static_cast<size_t>(e) * 144];
+    for (int k = 0; k < 144; ++k)
+      if (sc[k] >= 0) {
+        K[sc[k]] += Ke(k % 12, k / 12);
+        D[sc[k]] += De(k % 12, k / 12);
+      }
+  }
+}
+
+void FemModel::transpose_multiply(const ElementTangents& t, const double* lambda, double* Kt,
+                                  double* Dt) const {
+  std::fill(Kt, Kt + n_, 0.0);
+  std::fill(Dt, Dt + n_, 0.0);
+  Eigen::Matrix<double, 3, 4> le;
+  for (int e = 0; e < mesh_.num_tets(); ++e) {
+    const auto& el = elements_[e];
+    for (int a = 0; a < 4; ++a)
+      for (int i = 0; i < 3; ++i) {
+        const int d = dof(el.nodes[a], i);
+        le(i, a) = d >= 0 ? lambda[d] : 0.0;
+      }
+    Eigen::Matrix<double, 3, 4> kt, dt;
+    element_transpose_product(el, t.dPdF[e], le, kt);
+    element_transpose_product(el, t.dPdFdot[e], le, dt);
+    if (t.mass_damping[e] != 0) {
+      const Eigen::Matrix<double, 12, 1> m = t.mass_damping[e] * element_mass(e) * le.reshaped();
+      dt += m.reshaped(3, 4);
+    }
+    for (int a = 0; a < 4; ++a)
+      for (int i = 0; i < 3; ++i) {
+        const int d = dof(el.nodes[a], i);
+        if (d < 0) continue;
+        Kt[d] += kt(i, a);
+        Dt[d] += dt(i, a);
+      }
+  }
 }
 
 double FemModel::kinetic_energy(const Eigen::Matrix3Xd& v) const {

@@ -62,6 +62,25 @@ struct AssemblyOutput {
   double failed_det = 0;        // det F of that element
 };
 
+/// The tangents of one element summed over its material terms at one state.
+struct ElementResponse {
+  Mat3 P;
+  Mat9 dPdF, dPdFdot;
+  double mass_damping = 0;  // α of the α M v force
+  double energy = 0;        // Ψ (energy density)
+  double det_F = 0;         // set when the element is inadmissible
+};
+
+/// Per-element tangents at one state, kept so that the adjoint can form Kᵀλ and
+/// Dᵀλ element by element for every residual and assemble K and D only when IDAS
+/// asks for a new Newton matrix.
+struct ElementTangents {
+  std::vector<Mat9> dPdF, dPdFdot;
+  std::vector<double> mass_damping;
+  int failed_element = -1;
+  double failed_det = 0;
+};
+
 class FemModel {
  public:
   FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
@@ -109,6 +128,17 @@ class FemModel {
   bool assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const AssemblyRequest& req,
                 AssemblyOutput& out) const;
 
+  /// Per-element tangents at full positions x and velocities v; false (with
+  /// failed_element set) when some element is inadmissible.
+  bool element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                        ElementTangents& out) const;
+  /// K and D values in pattern() order from element tangents.
+  void assemble_tangents(const ElementTangents& t, std::vector<double>& K,
+                         std::vector<double>& D) const;
+  /// Kt = Kᵀλ and Dt = Dᵀλ over the free dofs, element by element.
+  void transpose_multiply(const ElementTangents& t, const double* lambda, double* Kt,
+                          double* Dt) const;
+
   /// The element with the smallest det F at full positions x, and that det F.
   std::pair<int, double> most_compressed_element(const Eigen::Matrix3Xd& x) const;
 
@@ -125,6 +155,10 @@ class FemModel {
   double gravity_potential(const Eigen::Matrix3Xd& x) const;
 
  private:
+  /// P, the requested tangents (kTangent, kRateTangent) and energy of element e,
+  /// summed over the material terms; false when a term rejects the state.
+  bool evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                        unsigned request, ElementResponse& out) const;
   void build_pattern();
   void build_mass();
 
