@@ -65,7 +65,21 @@ struct Context {
   double scale = 0;  // see objective_scale
   int budget = 0;
   bool budget_spent = false;
+  Eigen::VectorXd lo, hi;
+  double start_gradient = 0, best_gradient = 0;  // projected gradient norms
 };
+
+/// Norm of the gradient with the components that push against an active bound
+/// removed: the first-order optimality measure of a box-constrained problem.
+double projected_norm(const Eigen::VectorXd& g, const Eigen::Ref<const Eigen::VectorXd>& p,
+                      const Eigen::VectorXd& lo, const Eigen::VectorXd& hi) {
+  double sum = 0;
+  for (long j = 0; j < g.size(); ++j) {
+    const bool blocked = (p[j] <= lo[j] && g[j] > 0) || (p[j] >= hi[j] && g[j] < 0);
+    if (!blocked) sum += g[j] * g[j];
+  }
+  return std::sqrt(sum);
+}
 
 double objective(const std::vector<double>& x, std::vector<double>& grad, void* data) {
   auto& c = *static_cast<Context*>(data);
@@ -105,6 +119,10 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     if (ev.ok && (c.outcome.best.evaluation == 0 || r.objective < c.outcome.best.objective)) {
       // The first evaluation is the start point (iteration 0, or the resumed iterate).
       r.accepted = true;
+      if (ev.gradient.size()) {
+        c.best_gradient = projected_norm(g, p, c.lo, c.hi);
+        if (c.outcome.best.evaluation == 0) c.start_gradient = c.best_gradient;
+      }
       if (c.outcome.best.evaluation != 0) ++c.iteration;
       r.iteration = c.iteration;
       c.outcome.best = r;
@@ -166,6 +184,8 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   c.start = std::chrono::steady_clock::now();
 
   const Eigen::VectorXd lo = map.lower(), hi = map.upper();
+  c.lo = lo;
+  c.hi = hi;
   opt.set_lower_bounds(std::vector<double>(lo.data(), lo.data() + n));
   opt.set_upper_bounds(std::vector<double>(hi.data(), hi.data() + n));
   opt.set_min_objective(objective, &c);
@@ -195,8 +215,12 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   // L-BFGS's line search gives up (NLopt "failure", round-off) when its curvature
   // pairs go stale, e.g. after backing off from a failed simulation. A restart from
   // the best point with a fresh memory usually goes on; restarts continue while they
-  // still improve the best and budget remains.
+  // still improve the best by more than kRestartGain and budget remains. A best
+  // point whose projected gradient fell kConvergedGradient-fold from the start's
+  // is a minimum at the objective's accuracy: the line search fails there because
+  // Φ's integration noise exceeds any further decrease, so no restart is spent.
   constexpr int kMaxRestarts = 5;
+  constexpr double kRestartGain = 1e-6, kConvergedGradient = 1e-4;
   for (int restart = 0;; ++restart) {
     const double best_before = c.outcome.best.objective;
     bool gave_up = false;
@@ -215,8 +239,23 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       c.outcome.stop_reason = fmt::format("optimiser failure: {}", e.what());
       gave_up = true;
     }
+    // L-BFGS reports a force_stop inside its line search as a plain failure.
+    if (c.outcome.interrupted || c.budget_spent) {
+      c.outcome.stop_reason =
+          c.outcome.interrupted ? "interrupted" : describe(nlopt::MAXEVAL_REACHED);
+      break;
+    }
     if (c.error) std::rethrow_exception(c.error);
-    const bool improved = restart == 0 || c.outcome.best.objective < best_before;
+    if (gave_up && c.start_gradient > 0 &&
+        c.best_gradient <= kConvergedGradient * c.start_gradient) {
+      c.outcome.stop_reason = fmt::format(
+          "converged: projected gradient {:.1e} times its start value, the line search "
+          "can go no further at the objective's accuracy",
+          c.best_gradient / c.start_gradient);
+      break;
+    }
+    const bool improved = restart == 0 || best_before - c.outcome.best.objective >
+                                              kRestartGain * std::abs(best_before);
     const int left = budget - c.outcome.evaluations;
     if (!gave_up || !improved || left <= 0 || restart >= kMaxRestarts ||
         c.outcome.best.evaluation == 0)
