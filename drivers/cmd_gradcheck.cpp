@@ -13,6 +13,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
   struct Args {
     std::string scenario;
     double end = 0, rtol = 1e-8, atol = 1e-12, tolerance = 1e-5, fd_tolerance = 1e-3;
+    double fd_step = GradientCheckOptions{}.fd_step;
     double segment = 0;
     long checkpoint_steps = 0;
     unsigned seed = 1;
@@ -40,6 +41,12 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
   cmd->add_option("--segment", args->segment, "adjoint segment length (s); 0 = one segment");
   cmd->add_option("--checkpoint-steps", args->checkpoint_steps, "IDAS steps between checkpoints");
   cmd->add_option("--seed", args->seed, "seed of the random direction")->capture_default_str();
+  cmd->add_option("--fd-step", args->fd_step,
+                  "central-difference step (relative for log parameters); long oscillatory "
+                  "runs need smaller steps, their misfit turning over on a scale of 1/(phase "
+                  "sensitivity)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   cmd->add_flag("--no-forward", args->no_forward,
                 "skip forward sensitivities (their cost grows with the parameter count)");
   cmd->callback([args, &exit_code] {
@@ -59,6 +66,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
     const ParameterMap& map = problem->map();
     GradientCheckOptions o;
     o.seed = args->seed;
+    o.fd_step = args->fd_step;
     o.forward = !args->no_forward;
     o.adjoint.segment = args->segment;
     o.adjoint.checkpoint_steps = args->checkpoint_steps;
