@@ -91,6 +91,8 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
       dae(e.model()),
       n(e.model().num_dofs()),
       t_end(e.scenario().time.end) {
+  iopt.rtol *= o.tolerance_scale;
+  iopt.atol *= o.tolerance_scale;
   initial_state(ex.scenario(), model, x0, v0);
 }
 

@@ -25,8 +25,9 @@ const char* to_string(GradientMethod m);
 
 struct GradientOptions {
   GradientMethod method = GradientMethod::kAdjoint;
-  long checkpoint_steps = 0;  // IDAS steps between checkpoints; 0 = default
-  double segment = 0;         // simulated seconds per adjoint segment; 0 = one segment
+  long checkpoint_steps = 0;   // IDAS steps between checkpoints; 0 = default
+  double segment = 0;          // simulated seconds per adjoint segment; 0 = one segment
+  double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit tightens it)
   const std::atomic<bool>* interrupt = nullptr;
 };
 

@@ -114,6 +114,9 @@ int run(const FitArgs& args) {
     if (!args.quiet && (r.accepted || !r.ok)) fmt::print("{}\n", progress_line(r));
     std::fflush(stdout);
   };
+  options.on_progress = [&](const std::string& line) {
+    if (!args.quiet) fmt::print("{}\n", line);
+  };
 
   FitSession session;
   session.outdir = outdir;

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <exception>
 #include <nlopt.hpp>
 
@@ -67,6 +68,9 @@ struct Context {
   bool budget_spent = false;
   Eigen::VectorXd lo, hi;
   double start_gradient = 0, best_gradient = 0;  // projected gradient norms
+  double tolerance_scale = 1;                    // see the restarts in run_fit
+  bool remeasure = false;
+  double remeasured = NAN;  // the best's objective at the new tolerances
 };
 
 /// Norm of the gradient with the components that push against an active bound
@@ -89,6 +93,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
   const Eigen::Map<const Eigen::VectorXd> p(x.data(), static_cast<long>(x.size()));
   try {
     GradientOptions gopt = c.options.gradient;
+    gopt.tolerance_scale *= c.tolerance_scale;
     if (grad.empty()) gopt.method = GradientMethod::kNone;
     const Evaluation ev = c.problem.evaluate(p, gopt);
 
@@ -116,14 +121,19 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     }
     ++c.outcome.evaluations;
     const bool interrupted = c.options.gradient.interrupt && c.options.gradient.interrupt->load();
-    if (ev.ok && (c.outcome.best.evaluation == 0 || r.objective < c.outcome.best.objective)) {
+    // After a tolerance change the best's value is re-measured at its own point.
+    const bool remeasure = c.remeasure && ev.ok;
+    c.remeasure = false;
+    if (ev.ok &&
+        (remeasure || c.outcome.best.evaluation == 0 || r.objective < c.outcome.best.objective)) {
       // The first evaluation is the start point (iteration 0, or the resumed iterate).
       r.accepted = true;
+      if (remeasure) c.remeasured = r.objective;
       if (ev.gradient.size()) {
         c.best_gradient = projected_norm(g, p, c.lo, c.hi);
         if (c.outcome.best.evaluation == 0) c.start_gradient = c.best_gradient;
       }
-      if (c.outcome.best.evaluation != 0) ++c.iteration;
+      if (c.outcome.best.evaluation != 0 && !remeasure) ++c.iteration;
       r.iteration = c.iteration;
       c.outcome.best = r;
       c.outcome.p = p;
@@ -213,20 +223,35 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   std::vector<double> x(p0.data(), p0.data() + n);
   for (int j = 0; j < n; ++j) x[j] = std::clamp(x[j], lo[j], hi[j]);
   // L-BFGS's line search gives up (NLopt "failure", round-off) when its curvature
-  // pairs go stale, e.g. after backing off from a failed simulation. A restart from
-  // the best point with a fresh memory usually goes on; restarts continue while they
-  // still improve the best by more than kRestartGain and budget remains. A best
-  // point whose projected gradient fell kConvergedGradient-fold from the start's
-  // is a minimum at the objective's accuracy: the line search fails there because
-  // Φ's integration noise exceeds any further decrease, so no restart is spent.
-  constexpr int kMaxRestarts = 5;
-  constexpr double kRestartGain = 1e-6, kConvergedGradient = 1e-4;
+  // pairs go stale, e.g. after backing off from a failed simulation, or on an
+  // ill-conditioned valley. A restart from the best point with a fresh memory and
+  // the objective rescaled there (so its gradient has norm ½ again: with the
+  // start's scale, the occluded-bar fit restarted with a gradient 1e-6 long, took
+  // steps as short and stopped on xtol, λ still 1.9× off) usually goes on.
+  // xtol/ftol stops count as giving up too: the same fit stopped on xtol with a
+  // gradient still pointing at the truth. Restarts continue while they improve
+  // the best by more than kRestartGain and budget remains. A best point whose projected gradient
+  // fell kConvergedGradient- fold from the start's is a minimum at the objective's accuracy: the
+  // line search fails there on Φ's integration noise, so no restart is spent.
+  //
+  // A restart that gains nothing means the line search cannot see a decrease through
+  // Φ's integration noise (an ill-conditioned valley, where only short steps go
+  // down); the solver tolerances are then tightened 10× (at most kTightenings times)
+  // and the fit goes on. The occluded-bar fit stalled so at rtol 1e-7, 1.9× off in
+  // λ, and reached the truth at rtol 1e-8.
+  constexpr int kMaxRestarts = 6, kTightenings = 2;
+  constexpr double kRestartGain = 1e-6, kConvergedGradient = 1e-8;
+  int tightenings = 0;
   for (int restart = 0;; ++restart) {
-    const double best_before = c.outcome.best.objective;
+    double best_before = c.outcome.best.objective;
+    c.remeasured = NAN;
     bool gave_up = false;
     double value = 0;
     try {
-      c.outcome.stop_reason = describe(opt.optimize(x, value));
+      const nlopt::result r = opt.optimize(x, value);
+      c.outcome.stop_reason = describe(r);
+      // A tolerance stop may be a stall: see the gradient test below.
+      gave_up = r == nlopt::XTOL_REACHED || r == nlopt::FTOL_REACHED;
     } catch (const nlopt::roundoff_limited&) {
       c.outcome.stop_reason = "converged: no further progress possible at the objective's accuracy";
       gave_up = true;
@@ -239,29 +264,41 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       c.outcome.stop_reason = fmt::format("optimiser failure: {}", e.what());
       gave_up = true;
     }
+    if (c.error) std::rethrow_exception(c.error);
     // L-BFGS reports a force_stop inside its line search as a plain failure.
     if (c.outcome.interrupted || c.budget_spent) {
       c.outcome.stop_reason =
           c.outcome.interrupted ? "interrupted" : describe(nlopt::MAXEVAL_REACHED);
       break;
     }
-    if (c.error) std::rethrow_exception(c.error);
     if (gave_up && c.start_gradient > 0 &&
         c.best_gradient <= kConvergedGradient * c.start_gradient) {
+      if (c.outcome.stop_reason.rfind("converged", 0) == 0) break;
       c.outcome.stop_reason = fmt::format(
           "converged: projected gradient {:.1e} times its start value, the line search "
           "can go no further at the objective's accuracy",
           c.best_gradient / c.start_gradient);
       break;
     }
+    if (!std::isnan(c.remeasured)) best_before = c.remeasured;
     const bool improved = restart == 0 || best_before - c.outcome.best.objective >
                                               kRestartGain * std::abs(best_before);
     const int left = budget - c.outcome.evaluations;
-    if (!gave_up || !improved || left <= 0 || restart >= kMaxRestarts ||
-        c.outcome.best.evaluation == 0)
-      break;
+    if (!gave_up || left <= 0 || restart >= kMaxRestarts || c.outcome.best.evaluation == 0) break;
+    if (!improved) {
+      if (tightenings == kTightenings || options.gradient.method == GradientMethod::kNone) break;
+      ++tightenings;
+      c.tolerance_scale *= 0.1;
+      c.remeasure = true;
+      if (options.on_progress)
+        options.on_progress(
+            fmt::format("line search stalled: solver tolerances tightened to "
+                        "{:g}× the scenario's",
+                        c.tolerance_scale));
+    }
     x.assign(c.outcome.p.data(), c.outcome.p.data() + n);
     opt.set_maxeval(left);
+    c.scale = 0;
   }
   if (c.outcome.best.evaluation == 0) c.outcome.p = p0;
   return c.outcome;

@@ -42,6 +42,9 @@ struct FitOptions {
   /// Called after every evaluation (the driver prints accepted ones and failures,
   /// appends history, saves the resume state).
   std::function<void(const FitRecord&)> on_evaluation;
+  /// Called with a line for the user when the loop changes course (e.g. tightens
+  /// the solver tolerances).
+  std::function<void(const std::string&)> on_progress;
   /// Numbering continues from here on --resume.
   int first_evaluation = 0, first_iteration = 0;
   double seconds_offset = 0;
