@@ -37,7 +37,7 @@ struct Backward {
   Eigen::Matrix3Xd x, v;
   std::string fatal;
 
-  explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model) {}
+  explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model), kt(r.n), dt(r.n) {}
 
   /// Element tangents and ∂g/∂x at the forward state (t, y), computed once per
   /// state: Newton iterations at one backward time reuse them, and K, D are
@@ -55,8 +55,6 @@ struct Backward {
 
   /// rB = [λx' − Kᵀλv + g_x ; M λv' + λx − Dᵀλv].
   void residual(const double* l, const double* lp, double* r) const {
-    kt.resize(n);
-    dt.resize(n);
     run.model.transpose_multiply(dae.tangents(), l + n, kt.data(), dt.data());
     for (int c = 0; c < n; ++c) {
       r[c] = lp[c] - kt[c] + gx[c];
