@@ -108,9 +108,9 @@ struct Fitted {
   std::unique_ptr<FitProblem> problem;
 };
 
-Fitted fit(const path& dir, const std::string& tracks) {
+Fitted fit(const path& dir, const std::string& tracks, const std::string& start = kStart) {
   Fitted f;
-  test::write_text(dir / "fit.yaml", bar(kStart, tracks, kFitSection));
+  test::write_text(dir / "fit.yaml", bar(start, tracks, kFitSection));
   f.scenario = std::make_unique<Scenario>(load_scenario((dir / "fit.yaml").string()));
   f.problem = std::make_unique<FitProblem>(*f.scenario, f.scenario->fit.parameters);
   FitOptions o;
@@ -157,22 +157,30 @@ TEST(Fit, OccludedBurstsStillRecoverTheParameters) {
   expect_recovered(f, 1e-3, 2e-3);
 }
 
-// DISABLED: not yet seen to pass — its first run did not finish before this
-// change landed (each fit takes ~80 evaluations, ~3 min here). Run it with
-// --gtest_also_run_disabled_tests; the issue 5 note says where it stands.
-TEST(Fit, DISABLED_MarkerNoiseGivesRmsAtTheNoiseLevelAndHonestStandardErrors) {
+// The noise test is about the statistics at the optimum, not about getting there
+// (the noise-free test starts 2× off): it starts 25% off, which saves half the
+// evaluations.
+const std::string kStartNear = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 7.5e5, mu: 2.4e5 }
+  viscous: { model: power-law, nu: 25, h: 0.8 })";
+
+TEST(Fit, MarkerNoiseGivesRmsAtTheNoiseLevelAndHonestStandardErrors) {
   const double sigma = 1e-3;
   const path dir = test::scratch("fit-noise");
   const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(kTruth)),
                                             dir / "noisy.csv", sigma, 0.0, 1, 11);
-  const Fitted f = fit(dir, tracks);
+  const Fitted f = fit(dir, tracks, kStartNear);
   const ParameterUncertainty u = gauss_newton_uncertainty(*f.problem, f.outcome.p);
   ASSERT_TRUE(u.ok) << u.error;
   // Residuals at the capture frames: per coordinate, the noise level.
   EXPECT_NEAR(u.sigma / sigma, 1.0, 0.1);
-  // The continuous RMS distance of Φ interpolates the noise linearly between frames:
-  // E‖r‖² = 3σ² · ∫₀¹ (1−s)² + s² ds = 2σ², so RMS = √2 σ.
-  EXPECT_NEAR(f.outcome.best.rms / (std::sqrt(2.0) * sigma), 1.0, 0.1);
+  // Φ's continuous RMS distance sees the noise through the observed track's cubic
+  // Hermite (Catmull-Rom on this uniform grid): between frames k and k+1 the track
+  // weighs x_{k−1}, x_k, x_{k+1}, x_{k+2} by −H10/2, H00 − H11/2, H01 + H10/2, H11/2,
+  // whose squares integrate over the interval to 57/70. Hence E‖r‖² = 3σ² · 57/70
+  // per marker (2σ² for a linear track).
+  EXPECT_NEAR(f.outcome.best.rms / (std::sqrt(3.0 * 57 / 70) * sigma), 1.0, 0.1);
   for (int j = 0; j < 3; ++j) {
     const double z = (f.q[j] - kTrue[j]) / u.std_error[j];
     EXPECT_LT(std::abs(z), 3.0) << f.problem->map().label(j) << " fitted " << f.q[j] << " ± "
