@@ -17,6 +17,7 @@
 #include <sunlinsol/sunlinsol_klu.h>
 #include <sunmatrix/sunmatrix_sparse.h>
 
+#include <algorithm>
 #include <cstring>
 
 #include "adjoint/experiment_run.hpp"
@@ -240,6 +241,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
 
   // Pass 1 (only with several segments): Φ and the state at every boundary.
   std::vector<Eigen::VectorXd> xs{run.x0}, vs{run.v0};
+  std::vector<long> segment_steps;
   result.phi_per_marker.setZero(run.objective.num_markers());
   if (segments > 1) {
     for (int k = 0; k + 1 < segments; ++k) {
@@ -247,6 +249,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       const bool ok = run.advance(*integ, T[k + 1], result);
       result.phi_per_marker += integ->quadrature();
       result.forward_stats.steps += integ->stats().steps;
+      segment_steps.push_back(integ->stats().steps);
       if (!ok) return;
       xs.push_back(integ->positions());
       vs.push_back(integ->velocities());
@@ -259,7 +262,17 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
   for (int k = segments - 1; k >= 0; --k) {
     auto integ = run.start(T[k], xs[k], vs[k]);
-    integ->record_checkpoints(nd);
+    // IDAS allocates the Hermite points of a whole checkpoint interval up front.
+    // Pass 1 counted each segment's steps (the last one's is estimated from the
+    // others), so a segment gets no more points than it needs: short segments then
+    // keep the adjoint's memory near the forward run's, which is what they are for.
+    long nd_k = nd;
+    if (k + 1 < segments)
+      nd_k = std::min(nd, segment_steps[k] + 8);
+    else if (!segment_steps.empty())
+      nd_k =
+          std::min(nd, *std::max_element(segment_steps.begin(), segment_steps.end()) * 5 / 4 + 8);
+    integ->record_checkpoints(nd_k);
     const bool ok = run.advance(*integ, T[k + 1], result);
     const IntegratorStats st = integ->stats();
     result.forward_stats.steps += st.steps;
