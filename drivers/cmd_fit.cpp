@@ -89,6 +89,7 @@ int run(const FitArgs& args) {
       options.first_evaluation = saved.evaluations;
       options.first_iteration = saved.iterations;
       options.seconds_offset = saved.seconds;
+      options.gradient.tolerance_scale = saved.tolerance_scale;
     }
   } catch (const Error& e) {
     fmt::print(stderr, "error: {}\n", e.what());
@@ -99,11 +100,16 @@ int run(const FitArgs& args) {
     fmt::print("kelvin fit: {} — {} parameters, {} experiment(s), {} with {} gradients → {}\n",
                scenario.name, map.size(), problem->num_experiments(), options.algorithm,
                to_string(options.gradient.method), outdir);
+  if (!args.quiet && options.gradient.tolerance_scale < 1)
+    fmt::print(
+        "resuming at solver tolerances {:g}× the scenario's, as the fit had tightened them\n",
+        options.gradient.tolerance_scale);
   options.on_evaluation = [&](const FitRecord& r) {
     history.append(r);
     state.evaluations = r.evaluation;
     state.iterations = r.iteration;
     state.seconds = r.seconds;
+    state.tolerance_scale = r.tolerance_scale;
     if (!r.ok) ++state.failures;
     if (r.accepted) {
       state.best = r.p;

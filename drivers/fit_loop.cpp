@@ -98,6 +98,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     const Evaluation ev = c.problem.evaluate(p, gopt);
 
     FitRecord r;
+    r.tolerance_scale = gopt.tolerance_scale;
     r.evaluation = c.options.first_evaluation + c.outcome.evaluations + 1;
     r.p = p;
     r.seconds = c.options.seconds_offset +

@@ -29,7 +29,10 @@ struct FitRecord {
   double rms = 0;        // marker RMS (m)
   double gradient_norm = 0;
   double seconds = 0;  // elapsed since the fit started (s)
-  Eigen::VectorXd p;   // optimiser-space parameters of this trial
+  /// Solver tolerances of this trial relative to the scenario's (below 1 once the
+  /// loop tightened them; a resumed fit goes on at the saved scale).
+  double tolerance_scale = 1;
+  Eigen::VectorXd p;  // optimiser-space parameters of this trial
 };
 
 struct FitOptions {

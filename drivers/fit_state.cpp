@@ -96,6 +96,7 @@ void write_fit_state(const std::string& path, const FitState& s) {
   out << YAML::Key << "iterations" << YAML::Value << s.iterations;
   out << YAML::Key << "failures" << YAML::Value << s.failures;
   out << YAML::Key << "seconds" << YAML::Value << exact(s.seconds);
+  out << YAML::Key << "tolerance_scale" << YAML::Value << exact(s.tolerance_scale);
   out << YAML::Key << "best_objective" << YAML::Value << exact(s.best_objective);
   out << YAML::Key << "best_rms" << YAML::Value << exact(s.best_rms);
   out << YAML::Key << "parameters" << YAML::Value << YAML::BeginSeq;
@@ -121,6 +122,8 @@ FitState read_fit_state(const std::string& path) {
     s.iterations = root["iterations"].as<int>();
     s.failures = root["failures"].as<int>();
     s.seconds = root["seconds"].as<double>();
+    // Absent in states saved before the loop could tighten the tolerances.
+    if (root["tolerance_scale"]) s.tolerance_scale = root["tolerance_scale"].as<double>();
     s.best_objective = root["best_objective"].as<double>();
     s.best_rms = root["best_rms"].as<double>();
     const YAML::Node params = root["parameters"];

@@ -42,6 +42,7 @@ struct FitState {
   double best_objective = 0, best_rms = 0;
   int evaluations = 0, iterations = 0, failures = 0;
   double seconds = 0;
+  double tolerance_scale = 1;  // FitRecord::tolerance_scale of the last evaluation
 };
 
 void write_fit_state(const std::string& path, const FitState& state);

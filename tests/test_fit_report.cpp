@@ -10,7 +10,9 @@
 #include <sstream>
 
 #include "drivers/fit_report.hpp"
+#include "drivers/fit_state.hpp"
 #include "drivers/svg_plot.hpp"
+#include "engine/error.hpp"
 
 namespace fs = std::filesystem;
 using kelvin::svg::Plot;
@@ -427,6 +429,57 @@ TEST_F(FitReportTest, InterruptedWithoutMarkerEvaluation) {
   EXPECT_EQ(md.find("## Markers"), std::string::npos);
   EXPECT_EQ(md.find("## L-curve"), std::string::npos);
   EXPECT_EQ(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()), 1);
+}
+
+// --resume continues from the saved state exactly: parameters to the last bit, and
+// the solver tolerances the loop had tightened to.
+TEST(FitState, RoundTripsExactlyWithTheToleranceScale) {
+  const fs::path dir = fs::temp_directory_path() / fmt::format("kelvin-fit-state-{}", getpid());
+  fs::create_directories(dir);
+  const std::string path = (dir / "fit-state.yaml").string();
+  kelvin::FitState s;
+  s.scenario = "/data/bar.yaml";
+  s.labels = {"elastic.mu", "viscous.nu"};
+  s.start = Eigen::Vector2d(std::log(1.5e5), std::log(40.0));
+  s.best = Eigen::Vector2d(std::log(3e5) + 1e-13, 0.1 + 0.2);
+  s.best_objective = 1.0 / 3.0;
+  s.best_rms = 2e-6 / 7;
+  s.evaluations = 42;
+  s.iterations = 17;
+  s.failures = 3;
+  s.seconds = 12.5;
+  s.tolerance_scale = 0.01;
+  kelvin::write_fit_state(path, s);
+  const kelvin::FitState r = kelvin::read_fit_state(path);
+  EXPECT_EQ(r.scenario, s.scenario);
+  EXPECT_EQ(r.labels, s.labels);
+  EXPECT_EQ(r.start, s.start);
+  EXPECT_EQ(r.best, s.best);
+  EXPECT_EQ(r.best_objective, s.best_objective);
+  EXPECT_EQ(r.best_rms, s.best_rms);
+  EXPECT_EQ(r.evaluations, 42);
+  EXPECT_EQ(r.iterations, 17);
+  EXPECT_EQ(r.failures, 3);
+  EXPECT_EQ(r.tolerance_scale, 0.01);
+
+  // A state saved before tolerances could be tightened resumes at the scenario's.
+  std::string text;
+  {
+    std::ifstream in(path);
+    for (std::string line; std::getline(in, line);)
+      if (line.rfind("tolerance_scale", 0) != 0) text += line + "\n";
+  }
+  std::ofstream(path) << text;
+  EXPECT_EQ(kelvin::read_fit_state(path).tolerance_scale, 1.0);
+
+  std::ofstream(path) << "scenario: [unclosed\n";
+  try {
+    kelvin::read_fit_state(path);
+    ADD_FAILURE() << "a malformed state was accepted";
+  } catch (const kelvin::Error& e) {
+    EXPECT_NE(std::string(e.what()).find(path + ": line "), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace
