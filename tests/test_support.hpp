@@ -60,6 +60,7 @@ struct ShakenBar {
   std::string name = "bar";
   std::string material;
   double amplitude_y = 0.003, amplitude_z = 0.002;  // m
+  double frequency_y = 17, frequency_z = 13;        // Hz
   double end = 0.1, output_rate = 200;              // s, Hz
   double rtol = 1e-9, atol = 1e-13;
   std::string tail;
@@ -79,13 +80,13 @@ clamps:
     motion:
       sinusoids:
         translation:
-          - {{ amplitude: {}, frequency: 17, phase: -1.5707963267948966, direction: [0, 1, 0] }}
-          - {{ amplitude: {}, frequency: 13, phase: -1.5707963267948966, direction: [0, 0, 1] }}
+          - {{ amplitude: {}, frequency: {}, phase: -1.5707963267948966, direction: [0, 1, 0] }}
+          - {{ amplitude: {}, frequency: {}, phase: -1.5707963267948966, direction: [0, 0, 1] }}
 time: {{ end: {}, output_rate: {} }}
 solver: {{ rtol: {}, atol: {} }}
 )",
-                     b.name, b.material, b.amplitude_y, b.amplitude_z, b.end, b.output_rate, b.rtol,
-                     b.atol) +
+                     b.name, b.material, b.amplitude_y, b.frequency_y, b.amplitude_z, b.frequency_z,
+                     b.end, b.output_rate, b.rtol, b.atol) +
          b.tail;
 }
 
