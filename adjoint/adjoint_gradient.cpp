@@ -6,7 +6,8 @@
 // quadrature q' = λvᵀ∂R/∂q from q(T) = 0 down to t₀, so q(t₀) = −∫_{t₀}^{T} λvᵀ∂R/∂q dt
 // is the integral term itself.
 //
-// Segments: the forward pass stores one state per segment boundary; each segment is
+// Segments: the forward pass stores one state per segment boundary (in a temporary
+// file, see BoundaryStates); each segment is
 // then re-integrated from its start with checkpoints and solved backward, λ being
 // continuous across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺)).
 // The forward model restarts at the same boundaries in every pass, so the gradient
@@ -18,6 +19,7 @@
 #include <sunmatrix/sunmatrix_sparse.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 
 #include "adjoint/experiment_run.hpp"
@@ -152,7 +154,7 @@ void check(int flag, const char* call) {
 /// Measured on the foam cylinder (0.1 s, rtol 1e-6): 1e-3 → 1038 backward steps and
 /// 3e-6 relative agreement with forward sensitivities; 1e-1 → 508 steps, 1.4e-5;
 /// 1 → 291 steps, 2e-4.
-constexpr double kAdjointAtolFactor = 1e-2;
+constexpr double kAdjointAtolFactor = 1e-1;
 
 /// Solves one segment backward from (T1, λ) to T0; adds −∫λvᵀ∂R/∂q dt to dphi_dq.
 bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, double T1,
@@ -229,6 +231,51 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
   return true;
 }
 
+/// The states at the segment boundaries, in an unlinked temporary file: with
+/// thousands of segments they would otherwise be the one part of the adjoint's
+/// memory that grows with the simulated time (7 MB on the 720-tet cylinder at 30 s
+/// in 0.05 s segments, against 11 MB for the whole forward run). In memory when no
+/// temporary file can be made.
+class BoundaryStates {
+ public:
+  explicit BoundaryStates(long n) : n_(n), file_(std::tmpfile()) {}
+  ~BoundaryStates() {
+    if (file_) std::fclose(file_);
+  }
+  BoundaryStates(const BoundaryStates&) = delete;
+  BoundaryStates& operator=(const BoundaryStates&) = delete;
+
+  void push(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+    if (file_ && std::fseek(file_, 0, SEEK_END) == 0 &&
+        std::fwrite(x.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
+        std::fwrite(v.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_)) {
+      return;
+    }
+    if (file_) throw Error("could not write a segment boundary state to a temporary file");
+    memory_.push_back(x);
+    memory_.push_back(v);
+  }
+
+  void get(long k, Eigen::VectorXd& x, Eigen::VectorXd& v) {
+    x.resize(n_);
+    v.resize(n_);
+    if (!file_) {
+      x = memory_[2 * k];
+      v = memory_[2 * k + 1];
+      return;
+    }
+    if (std::fseek(file_, static_cast<long>(2 * k * n_ * sizeof(double)), SEEK_SET) != 0 ||
+        std::fread(x.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_) ||
+        std::fread(v.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_))
+      throw Error("could not read a segment boundary state back from its temporary file");
+  }
+
+ private:
+  long n_;
+  std::FILE* file_;
+  std::vector<Eigen::VectorXd> memory_;
+};
+
 }  // namespace
 
 void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
@@ -240,19 +287,22 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       run.opt.checkpoint_steps > 0 ? run.opt.checkpoint_steps : default_checkpoint_steps(2 * n);
 
   // Pass 1 (only with several segments): Φ and the state at every boundary.
-  std::vector<Eigen::VectorXd> xs{run.x0}, vs{run.v0};
+  BoundaryStates boundaries(run.x0.size());
+  boundaries.push(run.x0, run.v0);
+  Eigen::VectorXd x = run.x0, v = run.v0;
   std::vector<long> segment_steps;
   result.phi_per_marker.setZero(run.objective.num_markers());
   if (segments > 1) {
     for (int k = 0; k + 1 < segments; ++k) {
-      auto integ = run.start(T[k], xs[k], vs[k]);
+      auto integ = run.start(T[k], x, v);
       const bool ok = run.advance(*integ, T[k + 1], result);
       result.phi_per_marker += integ->quadrature();
       result.forward_stats.steps += integ->stats().steps;
       segment_steps.push_back(integ->stats().steps);
       if (!ok) return;
-      xs.push_back(integ->positions());
-      vs.push_back(integ->velocities());
+      x = integ->positions();
+      v = integ->velocities();
+      boundaries.push(x, v);
     }
   }
 
@@ -261,7 +311,8 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   result.dphi_dq.setZero(ns, ne);
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
   for (int k = segments - 1; k >= 0; --k) {
-    auto integ = run.start(T[k], xs[k], vs[k]);
+    boundaries.get(k, x, v);
+    auto integ = run.start(T[k], x, v);
     // IDAS allocates the Hermite points of a whole checkpoint interval up front.
     // Pass 1 counted each segment's steps (the last one's is estimated from the
     // others), so a segment gets no more points than it needs: short segments then

@@ -148,6 +148,14 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
       result.t_reached = integ.time();
       return false;
     }
+    if (opt.max_steps > 0 && result.forward_stats.steps + integ.stats().steps > opt.max_steps) {
+      result.error = fmt::format(
+          "abandoned at t = {:.6g} s after more than {} integrator steps (the limit for this "
+          "trial)",
+          integ.time(), opt.max_steps);
+      result.t_reached = integ.time();
+      return false;
+    }
     if (t < t1 && opt.interrupt && opt.interrupt->load()) {
       result.error = fmt::format("interrupted at t = {:.6g} s", integ.time());
       result.t_reached = integ.time();

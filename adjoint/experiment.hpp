@@ -28,6 +28,9 @@ struct GradientOptions {
   long checkpoint_steps = 0;   // IDAS steps between checkpoints; 0 = default
   double segment = 0;          // simulated seconds per adjoint segment; 0 = one segment
   double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit tightens it)
+  /// An experiment whose forward run takes more IDAS steps than this fails
+  /// (0: no limit). The fit bounds its line-search trials so (see run_fit).
+  long max_steps = 0;
   const std::atomic<bool>* interrupt = nullptr;
 };
 

@@ -53,6 +53,9 @@ double objective_scale(bool ok, double objective, const Eigen::VectorXd& gradien
   return g > 0 ? 0.5 / g : 1 / objective;
 }
 
+/// See the trial step limit in objective().
+constexpr long kTrialStepFactor = 20;
+
 struct Context {
   Context(FitProblem& pr, const FitOptions& o) : problem(pr), options(o) {}
   FitProblem& problem;
@@ -69,6 +72,7 @@ struct Context {
   Eigen::VectorXd lo, hi;
   double start_gradient = 0, best_gradient = 0;  // projected gradient norms
   double tolerance_scale = 1;                    // see the restarts in run_fit
+  long best_steps = 0;  // most forward steps of one experiment at the best point
   bool remeasure = false;
   double remeasured = NAN;  // the best's objective at the new tolerances
 };
@@ -94,6 +98,12 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
   try {
     GradientOptions gopt = c.options.gradient;
     gopt.tolerance_scale *= c.tolerance_scale;
+    // A line-search trial far out in parameter space (a flow index of 5, say) can
+    // make the DAE so stiff that one simulation takes an hour: the joint
+    // four-parameter bar fit sat 30 min in one trial after 5 s evaluations. A trial
+    // that needs kTrialStepFactor× the best point's steps fails instead, and the
+    // line search backs off as from any failed simulation.
+    if (c.best_steps > 0 && gopt.max_steps == 0) gopt.max_steps = kTrialStepFactor * c.best_steps;
     if (grad.empty()) gopt.method = GradientMethod::kNone;
     const Evaluation ev = c.problem.evaluate(p, gopt);
 
@@ -135,6 +145,9 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
         if (c.outcome.best.evaluation == 0) c.start_gradient = c.best_gradient;
       }
       if (c.outcome.best.evaluation != 0 && !remeasure) ++c.iteration;
+      c.best_steps = 0;
+      for (const auto& e : ev.experiments)
+        c.best_steps = std::max(c.best_steps, e.forward_stats.steps);
       r.iteration = c.iteration;
       c.outcome.best = r;
       c.outcome.p = p;

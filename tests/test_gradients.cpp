@@ -146,6 +146,33 @@ TEST(Gradients, SegmentedAdjointMatchesSingleSegment) {
   EXPECT_NEAR(a.phi, b.phi, 1e-8 * a.phi);
 }
 
+// The fit bounds each line-search trial's steps: past the limit the evaluation
+// fails (and says where it stopped) instead of running on, for every method.
+TEST(Gradients, StepLimitFailsTheEvaluationAndSaysWhere) {
+  const fs::path dir = scratch("step-limit");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  FitProblem problem(s, {param("elastic.mu")});
+  const Eigen::VectorXd p = problem.map().initial();
+  for (GradientMethod method :
+       {GradientMethod::kNone, GradientMethod::kForward, GradientMethod::kAdjoint}) {
+    GradientOptions o;
+    o.method = method;
+    const Evaluation full = problem.evaluate(p, o);
+    ASSERT_TRUE(full.ok) << full.error;
+    const long steps = full.experiments[0].forward_stats.steps;
+    o.max_steps = steps / 2;
+    const Evaluation cut = problem.evaluate(p, o);
+    EXPECT_FALSE(cut.ok) << to_string(method);
+    EXPECT_NE(cut.error.find(fmt::format("more than {} integrator steps", steps / 2)),
+              std::string::npos)
+        << cut.error;
+    EXPECT_GT(cut.experiments[0].t_reached, 0.0);
+    EXPECT_LT(cut.experiments[0].t_reached, s.time.end);
+    o.max_steps = steps;
+    EXPECT_TRUE(problem.evaluate(p, o).ok) << to_string(method);
+  }
+}
+
 TEST(Gradients, OccludedMarkerDropsExactlyItsIntervals) {
   // With the tip hidden in frames 5..9, the tip contributes nothing on [t₄, t₁₀]
   // (the intervals that touch a hidden frame), and elsewhere nothing changes except
