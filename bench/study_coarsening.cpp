@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
       const SimulationResult r = run_simulation(s, so);
       if (!r.completed) throw Error("truth simulation failed: " + r.error);
       fmt::print("{:.0f} s, {} steps\n", seconds_since(t0), r.stats.steps);
-      tracks.push_back(so.outdir + "/markers.csv");
+      tracks.push_back("truth-" + m.name + "/markers.csv");  // relative to the scenarios
     }
 
     std::string table = fmt::format(
