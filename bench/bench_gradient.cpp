@@ -76,12 +76,15 @@ Scenario with_observations(double h, double T, const std::string& dir, bool fork
     if (!r.completed) fmt::print(stderr, "truth simulation failed: {}\n", r.error);
     return r.completed ? 0 : 1;
   };
-  int status = 0;
-  if (fork_truth)
+  bool ok = false;
+  if (fork_truth) {
+    int status = 0;
     in_child(simulate, &status);
-  else
-    status = simulate() << 8;
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) throw Error("truth simulation failed");
+    ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  } else {
+    ok = simulate() == 0;
+  }
+  if (!ok) throw Error("truth simulation failed");
   Scenario s = truth;
   s.path = dir + "/scenario.yaml";
   s.markers.observed_path = dir + "/markers.csv";
