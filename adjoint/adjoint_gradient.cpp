@@ -289,15 +289,17 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   const long nd =
       run.opt.checkpoint_steps > 0 ? run.opt.checkpoint_steps : default_checkpoint_steps(2 * n);
 
-  // Pass 1 (only with several segments): Φ and the state at every boundary.
+  // Pass 1 (only with several segments): Φ and the state at every boundary, with
+  // the first step each restart takes (pass 2 must retrace pass 1's steps exactly).
   BoundaryStates boundaries(run.x0.size());
   boundaries.push(run.x0, run.v0);
   Eigen::VectorXd x = run.x0, v = run.v0;
   std::vector<long> segment_steps;
+  std::vector<double> first_steps{0.0};
   result.phi_per_marker.setZero(run.objective.num_markers());
   if (segments > 1) {
     for (int k = 0; k + 1 < segments; ++k) {
-      auto integ = run.start(T[k], x, v);
+      auto integ = run.start(T[k], x, v, first_steps[k]);
       const bool ok = run.advance(*integ, T[k + 1], result);
       result.phi_per_marker += integ->quadrature();
       result.forward_stats.steps += integ->stats().steps;
@@ -306,6 +308,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       x = integ->positions();
       v = integ->velocities();
       boundaries.push(x, v);
+      first_steps.push_back(integ->restart_step());
     }
   }
 
@@ -315,7 +318,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
   for (int k = segments - 1; k >= 0; --k) {
     boundaries.get(k, x, v);
-    auto integ = run.start(T[k], x, v);
+    auto integ = run.start(T[k], x, v, first_steps[k]);
     // IDAS allocates the Hermite points of a whole checkpoint interval up front.
     // Pass 1 counted each segment's steps (the last one's is estimated from the
     // others), so a segment gets no more points than it needs: short segments then

@@ -113,8 +113,12 @@ void ExperimentRun::expand(double t, const double* y, const double* yp) {
 }
 
 std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::VectorXd& x_free,
-                                                     const Eigen::VectorXd& v_free) {
-  auto integ = std::make_unique<IdasIntegrator>(model, iopt);
+                                                     const Eigen::VectorXd& v_free,
+                                                     double first_step) {
+  IntegratorOptions o = iopt;
+  if (first_step > 0)
+    o.initial_step = o.max_step > 0 ? std::min(first_step, o.max_step) : first_step;
+  auto integ = std::make_unique<IdasIntegrator>(model, o);
   integ->initialize(t, x_free, v_free);
   // Φ's integrand has kinks at every capture frame (linear tracks) and jumps where
   // a marker drops out; across them BDF quadrature without error control loses
@@ -221,9 +225,10 @@ void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
   const std::vector<double> T = run.boundaries();
   result.segments = static_cast<int>(T.size()) - 1;
   Eigen::VectorXd xk = run.x0, vk = run.v0;
+  double first_step = 0;
   result.phi_per_marker.setZero(run.objective.num_markers());
   for (size_t k = 0; k + 1 < T.size(); ++k) {
-    auto integ = run.start(T[k], xk, vk);
+    auto integ = run.start(T[k], xk, vk, first_step);
     const bool ok = run.advance(*integ, T[k + 1], result);
     result.phi_per_marker += integ->quadrature();
     const IntegratorStats st = integ->stats();
@@ -231,6 +236,7 @@ void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
     if (!ok) return;
     xk = integ->positions();
     vk = integ->velocities();
+    first_step = integ->restart_step();
   }
   result.ok = true;
 }

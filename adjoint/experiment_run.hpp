@@ -34,9 +34,11 @@ struct ExperimentRun {
 
   void expand(double t, const double* y, const double* yp);
   /// A fresh integrator at (t, y) with the Φ quadrature attached: every forward
-  /// pass of an evaluation is built here, so that they take identical steps.
+  /// pass of an evaluation is built here, so that they take identical steps. A
+  /// segment restart passes the first step the previous segment's integrator
+  /// proposed (IdasIntegrator::restart_step); 0 keeps the scenario's choice.
   std::unique_ptr<IdasIntegrator> start(double t, const Eigen::VectorXd& x_free,
-                                        const Eigen::VectorXd& v_free);
+                                        const Eigen::VectorXd& v_free, double first_step = 0);
   /// Attaches the state sensitivities dy/dp_j (every entry j of p) to an integrator
   /// fresh from start() at t₀, and returns their initial values yS0 (2n × p.size()):
   /// forward-sensitivity gradients and marker sensitivities share this one setup.

@@ -11,6 +11,7 @@
 //   build/bin/bench_gradient [--h 0.01] [--duration 0.1] [--repeat 3]
 //                            [--regions 100] [--memory-base 0.05] [--segment 0.05]
 //                            [--skip-cost] [--skip-memory] [--fsa-max 100]
+//                            [--memory-factors 1,10,100]
 // --fsa-max: forward sensitivities are timed only for maps with at most this many
 // parameters (their cost grows with the count; at ≥ 8k tets 100 of them take hours).
 #include <fmt/format.h>
@@ -21,6 +22,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -113,9 +115,14 @@ Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat) {
   return {median(t), e.experiments[0].forward_stats.steps, e.experiments[0].backward_steps};
 }
 
-/// Peak resident memory (MiB) of one evaluation run in a child process.
-double peak_memory(const Scenario& s, const std::vector<FitParameterSpec>& specs, GradientOptions o,
-                   long* steps) {
+/// Peak resident memory and wall time of one evaluation, run in a child process.
+struct Footprint {
+  double mib = 0, seconds = 0;
+  long steps = -1;
+};
+
+Footprint footprint(const Scenario& s, const std::vector<FitParameterSpec>& specs,
+                    GradientOptions o) {
   int pipefd[2];
   if (pipe(pipefd) != 0) throw Error("pipe failed");
   int status = 0;
@@ -124,15 +131,19 @@ double peak_memory(const Scenario& s, const std::vector<FitParameterSpec>& specs
         close(pipefd[0]);
         FitProblem problem(s, specs);
         const Evaluation e = problem.evaluate(problem.map().initial(), o);
-        const long n = e.ok ? e.experiments[0].forward_stats.steps : -1;
-        if (write(pipefd[1], &n, sizeof n) != sizeof n) return 2;
+        Footprint f;
+        f.seconds = e.seconds;
+        f.steps = e.ok ? e.experiments[0].forward_stats.steps : -1;
+        if (write(pipefd[1], &f, sizeof f) != sizeof f) return 2;
         return e.ok ? 0 : 1;
       },
       &status);
   close(pipefd[1]);
-  if (read(pipefd[0], steps, sizeof *steps) != sizeof *steps) *steps = -1;
+  Footprint f;
+  if (read(pipefd[0], &f, sizeof f) != sizeof f) f = Footprint{};
   close(pipefd[0]);
-  return ru.ru_maxrss / 1024.0;
+  f.mib = ru.ru_maxrss / 1024.0;
+  return f;
 }
 
 }  // namespace
@@ -141,6 +152,7 @@ int main(int argc, char** argv) {
   double h = 0.01, duration = 0.1, memory_base = 0.05, segment = 0.05;
   int repeat = 3, regions = 100, fsa_max = 100;
   bool cost = true, memory = true;
+  std::vector<double> factors = {1, 10, 100};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&] { return std::stod(argv[++i]); };
@@ -158,7 +170,15 @@ int main(int argc, char** argv) {
       segment = next();
     else if (a == "--fsa-max")
       fsa_max = static_cast<int>(next());
-    else if (a == "--skip-cost")
+    else if (a == "--memory-factors") {
+      factors.clear();
+      std::stringstream list(argv[++i]);
+      for (std::string f; std::getline(list, f, ',');) factors.push_back(std::stod(f));
+      if (factors.empty()) {
+        fmt::print(stderr, "--memory-factors needs at least one factor\n");
+        return 1;
+      }
+    } else if (a == "--skip-cost")
       cost = false;
     else if (a == "--skip-memory")
       memory = false;
@@ -174,25 +194,28 @@ int main(int argc, char** argv) {
 
   // First: no process may fork once this one has run CHOLMOD (see in_child).
   if (memory) {
-    const Scenario s = with_observations(h, 100 * memory_base, dir + "/memory", true);
+    const double longest = *std::max_element(factors.begin(), factors.end());
+    const Scenario s = with_observations(h, longest * memory_base, dir + "/memory", true);
     fmt::print(
         "\npeak resident memory (MiB), h = {} mm, 4 global parameters, segments of {} s, "
         "checkpoints every ≤ {} steps\n",
         1e3 * h, segment, default_checkpoint_steps(6 * s.mesh.num_nodes()));
     fmt::print(
-        "| duration (s) | steps | Φ alone | adjoint, one segment | adjoint, segments |\n"
-        "|---|---|---|---|---|\n");
-    for (double factor : {1.0, 10.0, 100.0}) {
+        "| duration (s) | steps | Φ alone | adjoint, one segment | adjoint, segments "
+        "| segments / Φ | time: one segment / Φ | segments / Φ |\n"
+        "|---|---|---|---|---|---|---|---|\n");
+    for (double factor : factors) {
       Scenario sc = s;
       sc.time.end = memory_base * factor;
       GradientOptions none, single, segmented;
       none.method = GradientMethod::kNone;
       segmented.segment = segment;
-      long steps = 0, unused = 0;
-      const double m0 = peak_memory(sc, {}, none, &steps);
-      const double m1 = peak_memory(sc, {}, single, &unused);
-      const double m2 = peak_memory(sc, {}, segmented, &unused);
-      fmt::print("| {:g} | {} | {:.1f} | {:.1f} | {:.1f} |\n", sc.time.end, steps, m0, m1, m2);
+      const Footprint f0 = footprint(sc, {}, none);
+      const Footprint f1 = footprint(sc, {}, single);
+      const Footprint f2 = footprint(sc, {}, segmented);
+      fmt::print("| {:g} | {} | {:.1f} | {:.1f} | {:.1f} | {:.2f} | {:.2f} | {:.2f} |\n",
+                 sc.time.end, f0.steps, f0.mib, f1.mib, f2.mib, f2.mib / f0.mib,
+                 f1.seconds / f0.seconds, f2.seconds / f0.seconds);
       std::fflush(stdout);
     }
   }

@@ -6,6 +6,7 @@
 #include <sunmatrix/sunmatrix_sparse.h>
 
 #include <chrono>
+#include <cmath>
 #include <vector>
 
 #include "engine/dae_system.hpp"
@@ -396,6 +397,21 @@ bool IdasIntegrator::advance_to(double tout, double t_stop) {
   x_ = Eigen::Map<const Eigen::VectorXd>(yo, n);
   v_ = Eigen::Map<const Eigen::VectorXd>(yo + n, n);
   return true;
+}
+
+double IdasIntegrator::restart_step() const {
+  const Impl& m = *impl_;
+  int order = 0;
+  if (!m.mem || IDAGetLastOrder(m.mem, &order) != IDA_SUCCESS || order < 2) return 0;
+  N_Vector ydd = N_VClone(m.y), w = N_VClone(m.y);
+  double h = 0;
+  if (IDAGetDky(m.mem, t_, 2, ydd) == IDA_SUCCESS && IDAGetErrWeights(m.mem, w) == IDA_SUCCESS) {
+    const double norm = N_VWrmsNorm(ydd, w);
+    if (norm > 0 && std::isfinite(norm)) h = std::sqrt(2 * 0.25 / norm);
+  }
+  N_VDestroy(ydd);
+  N_VDestroy(w);
+  return h;
 }
 
 IntegratorStats IdasIntegrator::stats() const {

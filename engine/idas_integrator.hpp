@@ -81,6 +81,14 @@ class IdasIntegrator {
   /// tout. Returns false on solver failure; error() then says why and at which time.
   bool advance_to(double tout, double t_stop);
 
+  /// The first step for a fresh integrator restarted from the state at time():
+  /// the largest first-order step whose local error, ½h²‖ÿ‖ in IDAS's error norm,
+  /// stays at a quarter of the tolerance, ÿ read off this integrator's interpolating
+  /// polynomial. IDAS's own first step is scaled to ‖ẏ‖ and is orders of magnitude
+  /// smaller here; climbing back from it took ~16 steps with a Newton matrix each.
+  /// 0 when the polynomial has no second derivative yet (IDAS then chooses).
+  double restart_step() const;
+
   double time() const { return t_; }                       // time of the interpolated state
   const Eigen::VectorXd& positions() const { return x_; }  // free dofs at time()
   const Eigen::VectorXd& velocities() const { return v_; }

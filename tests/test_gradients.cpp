@@ -144,6 +144,13 @@ TEST(Gradients, SegmentedAdjointMatchesSingleSegment) {
       << a.gradient.transpose() << "\n"
       << b.gradient.transpose();
   EXPECT_NEAR(a.phi, b.phi, 1e-8 * a.phi);
+  // Φ alone restarts at the same boundaries with the same first steps, so it
+  // retraces the adjoint's trajectory step for step.
+  GradientOptions phi_only = segmented;
+  phi_only.method = GradientMethod::kNone;
+  const Evaluation c = problem.evaluate(p, phi_only);
+  ASSERT_TRUE(c.ok) << c.error;
+  EXPECT_DOUBLE_EQ(c.phi, b.phi);
 }
 
 // The fit bounds each line-search trial's steps: past the limit the evaluation
