@@ -6,15 +6,12 @@
 // quadrature q' = λvᵀ∂R/∂q from q(T) = 0 down to t₀, so q(t₀) = −∫_{t₀}^{T} λvᵀ∂R/∂q dt
 // is the integral term itself.
 //
-// Segments end at the scenario's segment times or after checkpoint_steps steps
-// (ExperimentRun::plan_segment). The forward pass stores one state per segment
-// start (in a temporary file, see BoundaryStates); the last segment keeps its IDAS
-// checkpoints from that pass, every earlier one is integrated again from its start
-// with room for exactly its steps, and each is solved backward, λ being continuous
-// across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺)). Every
-// segment is one IDAS checkpoint interval, which IDAS never re-integrates. The
-// forward model restarts at the same states in every pass and in Φ alone, so the
-// gradient is exact for the trajectory whose Φ is reported.
+// Segments: the forward pass stores one state per segment boundary (in a temporary
+// file, see BoundaryStates); each segment is
+// then re-integrated from its start with checkpoints and solved backward, λ being
+// continuous across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺)).
+// The forward model restarts at the same boundaries in every pass, so the gradient
+// is exact for the trajectory whose Φ is reported.
 #include <fmt/format.h>
 #include <idas/idas.h>
 #include <nvector/nvector_serial.h>
@@ -286,70 +283,60 @@ class BoundaryStates {
 
 void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   const int n = run.n;
-  // Pass 1: Φ, and where each segment starts (state, first step) and ends, by the
-  // rule Φ alone follows too (ExperimentRun::plan_segment). The segment that
-  // reaches t_end records its checkpoints here and is solved backward first.
-  struct Segment {
-    double t0, first_step, t_stop;
-    long steps;
-  };
-  std::vector<Segment> segments;
-  BoundaryStates boundaries(run.x0.size());
-  Eigen::VectorXd x = run.x0, v = run.v0;
-  double t = run.t0, first_step = 0;
-  long longest = 0;
-  std::unique_ptr<IdasIntegrator> last;
-  result.phi_per_marker.setZero(run.objective.num_markers());
-  for (;;) {
-    const ExperimentRun::SegmentPlan plan = run.plan_segment(t, longest);
-    auto integ = run.start(t, x, v, first_step);
-    integ->limit_steps(plan.step_limit);
-    if (plan.last) integ->record_checkpoints(plan.step_limit + 1);
-    boundaries.push(x, v);
-    const bool ok = run.advance(*integ, plan.t_stop, result);
-    result.phi_per_marker += integ->quadrature();
-    const long steps = integ->stats().steps;
-    result.forward_stats.steps += steps;
-    result.segments = static_cast<int>(segments.size()) + 1;
-    if (!ok) return;
-    segments.push_back({t, first_step, plan.t_stop, steps});
-    longest = std::max(longest, steps);
-    t = integ->time();
-    if (t >= run.t_end) {
-      last = std::move(integ);
-      break;
-    }
-    x = integ->positions();
-    v = integ->velocities();
-    first_step = integ->restart_step();
-  }
-  run.set_adjoint_scale(result.phi_per_marker);
+  const std::vector<double> T = run.boundaries();
+  const int segments = static_cast<int>(T.size()) - 1;
+  result.segments = segments;
+  const long nd =
+      run.opt.checkpoint_steps > 0 ? run.opt.checkpoint_steps : default_checkpoint_steps(2 * n);
 
-  // Pass 2, last segment first: each earlier segment is integrated again from its
-  // start with checkpoints for exactly the steps it took, then solved backward.
+  // Pass 1 (only with several segments): Φ and the state at every boundary, with
+  // the first step each restart takes (pass 2 must retrace pass 1's steps exactly).
+  BoundaryStates boundaries(run.x0.size());
+  boundaries.push(run.x0, run.v0);
+  Eigen::VectorXd x = run.x0, v = run.v0;
+  std::vector<long> segment_steps;
+  std::vector<double> first_steps{0.0};
+  result.phi_per_marker.setZero(run.objective.num_markers());
+  if (segments > 1) {
+    for (int k = 0; k + 1 < segments; ++k) {
+      auto integ = run.start(T[k], x, v, first_steps[k]);
+      const bool ok = run.advance(*integ, T[k + 1], result);
+      result.phi_per_marker += integ->quadrature();
+      result.forward_stats.steps += integ->stats().steps;
+      segment_steps.push_back(integ->stats().steps);
+      if (!ok) return;
+      x = integ->positions();
+      v = integ->velocities();
+      boundaries.push(x, v);
+      first_steps.push_back(integ->restart_step());
+    }
+  }
+
   const int ns = static_cast<int>(run.deriv.slots().size());
   const int ne = run.model.mesh().num_tets();
   result.dphi_dq.setZero(ns, ne);
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
-  const int S = static_cast<int>(segments.size());
-  for (int k = S - 1; k >= 0; --k) {
-    const Segment& seg = segments[k];
-    const double t1 = k + 1 < S ? segments[k + 1].t0 : run.t_end;
-    std::unique_ptr<IdasIntegrator> integ = std::move(last);
-    if (k + 1 < S) {
-      boundaries.get(k, x, v);
-      integ = run.start(seg.t0, x, v, seg.first_step);
-      integ->limit_steps(seg.steps);
-      integ->record_checkpoints(seg.steps + 1);
-      const bool ok = run.advance(*integ, seg.t_stop, result);
-      result.forward_stats.steps += integ->stats().steps;
-      if (!ok) return;
-      if (integ->time() != t1)
-        throw Error(fmt::format(
-            "adjoint segment {} ended at t = {:.17g} s on its second pass, not at {:.17g} s", k,
-            integ->time(), t1));
-    }
-    if (!backward_segment(run, *integ, seg.t0, t1, lambda, result.dphi_dq, result)) return;
+  for (int k = segments - 1; k >= 0; --k) {
+    boundaries.get(k, x, v);
+    auto integ = run.start(T[k], x, v, first_steps[k]);
+    // IDAS allocates the Hermite points of a whole checkpoint interval up front.
+    // Pass 1 counted each segment's steps (the last one's is estimated from the
+    // others), so a segment gets no more points than it needs: short segments then
+    // keep the adjoint's memory near the forward run's, which is what they are for.
+    long nd_k = nd;
+    if (k + 1 < segments)
+      nd_k = std::min(nd, segment_steps[k] + 8);
+    else if (!segment_steps.empty())
+      nd_k =
+          std::min(nd, *std::max_element(segment_steps.begin(), segment_steps.end()) * 5 / 4 + 8);
+    integ->record_checkpoints(nd_k);
+    const bool ok = run.advance(*integ, T[k + 1], result);
+    const IntegratorStats st = integ->stats();
+    result.forward_stats.steps += st.steps;
+    if (k == segments - 1) result.phi_per_marker += integ->quadrature();
+    if (!ok) return;
+    if (k == segments - 1) run.set_adjoint_scale(result.phi_per_marker);
+    if (!backward_segment(run, *integ, T[k], T[k + 1], lambda, result.dphi_dq, result)) return;
   }
 
   if (run.static_initial()) {

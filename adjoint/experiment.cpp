@@ -107,21 +107,6 @@ std::vector<double> ExperimentRun::boundaries() const {
   return b;
 }
 
-ExperimentRun::SegmentPlan ExperimentRun::plan_segment(double t, long longest) const {
-  const double eps = 1e-9 * (t_end - t0);
-  double t_stop = t_end;
-  for (double b : boundaries())
-    if (b > t + eps) {
-      t_stop = b;
-      break;
-    }
-  const long cap =
-      opt.checkpoint_steps > 0 ? opt.checkpoint_steps : default_checkpoint_steps(2 * n);
-  const bool last = t_stop >= t_end;
-  const long limit = last && longest > 0 ? std::min(cap, longest * 5 / 4 + 8) : cap;
-  return {t_stop, limit, last};
-}
-
 void ExperimentRun::expand(double t, const double* y, const double* yp) {
   model.expand(t, y, y + n, x, v);
   model.expand_acceleration(t, yp + n, a);
@@ -167,7 +152,6 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
       result.t_reached = integ.time();
       return false;
     }
-    if (integ.at_step_limit()) break;
     if (opt.max_steps > 0 && result.forward_stats.steps + integ.stats().steps > opt.max_steps) {
       result.error = fmt::format(
           "abandoned at t = {:.6g} s after more than {} integrator steps (the limit for this "
@@ -182,7 +166,7 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
       return false;
     }
   }
-  result.t_reached = integ.time();
+  result.t_reached = t1;
   return true;
 }
 
@@ -238,24 +222,18 @@ void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
 
 void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
   // Segmented like the adjoint, so that Φ belongs to the same trajectory.
+  const std::vector<double> T = run.boundaries();
+  result.segments = static_cast<int>(T.size()) - 1;
   Eigen::VectorXd xk = run.x0, vk = run.v0;
-  double t = run.t0, first_step = 0;
-  long longest = 0;
-  result.segments = 0;
+  double first_step = 0;
   result.phi_per_marker.setZero(run.objective.num_markers());
-  for (;;) {
-    const ExperimentRun::SegmentPlan plan = run.plan_segment(t, longest);
-    auto integ = run.start(t, xk, vk, first_step);
-    integ->limit_steps(plan.step_limit);
-    const bool ok = run.advance(*integ, plan.t_stop, result);
+  for (size_t k = 0; k + 1 < T.size(); ++k) {
+    auto integ = run.start(T[k], xk, vk, first_step);
+    const bool ok = run.advance(*integ, T[k + 1], result);
     result.phi_per_marker += integ->quadrature();
-    const long steps = integ->stats().steps;
-    result.forward_stats.steps += steps;
-    ++result.segments;
+    const IntegratorStats st = integ->stats();
+    result.forward_stats.steps += st.steps;
     if (!ok) return;
-    longest = std::max(longest, steps);
-    t = integ->time();
-    if (t >= run.t_end) break;
     xk = integ->positions();
     vk = integ->velocities();
     first_step = integ->restart_step();

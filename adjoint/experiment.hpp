@@ -25,7 +25,7 @@ const char* to_string(GradientMethod m);
 
 struct GradientOptions {
   GradientMethod method = GradientMethod::kAdjoint;
-  long checkpoint_steps = 0;   // most steps per segment (one IDAS checkpoint interval); 0 = default
+  long checkpoint_steps = 0;   // IDAS steps between checkpoints; 0 = default
   double segment = 0;          // simulated seconds per adjoint segment; 0 = one segment
   double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit tightens it)
   /// An experiment whose forward run takes more IDAS steps than this fails
@@ -34,14 +34,13 @@ struct GradientOptions {
   const std::atomic<bool>* interrupt = nullptr;
 };
 
-/// Default most steps per segment (Nd) for a state of `state_size` entries. IDAS
-/// allocates Nd Hermite points (y and y', 16 bytes per entry each) up front, and a
-/// run longer than Nd steps is integrated twice (see ExperimentRun::plan_segment),
+/// Default checkpoint interval (steps) for a state of `state_size` entries. IDAS
+/// allocates Nd Hermite points (y and y', 16 bytes per entry each) up front and
+/// re-integrates every checkpoint interval but the last before solving it backward,
 /// so Nd trades that recomputation against memory. On the 720-tet foam cylinder
 /// (0.1 s, 583 steps, bench_gradient) Φ + adjoint over Φ was 4.8 at Nd = 100,
 /// 4.5 at 300 and 3.9 at 1000 (one interval), and 9.0 at 10⁵ (the allocation
-/// alone), measured with IDAS's own checkpoints. The budget keeps the points under
-/// 16 MiB; shorter segments bound long runs further.
+/// alone). The budget keeps the points under 16 MiB; segments bound long runs.
 inline long default_checkpoint_steps(int state_size) {
   const long per_point = 16L * std::max(state_size, 1);
   return std::clamp((16L << 20) / per_point, 50L, 1000L);

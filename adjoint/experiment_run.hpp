@@ -32,23 +32,6 @@ struct ExperimentRun {
   /// Segment boundaries t0 = T₀ < … < T_S = t_end.
   std::vector<double> boundaries() const;
 
-  /// Where a segment that starts at t ends: at the next boundary t_stop, or after
-  /// step_limit steps, whichever comes first. `longest` is the most steps an
-  /// earlier segment took. Φ alone and both adjoint passes follow this one rule, so
-  /// they restart at the same states. Every adjoint segment is thereby a single IDAS
-  /// checkpoint interval, and IDAS never re-integrates one: a re-integration
-  /// starts with a fresh Newton matrix, can take more steps than it recorded, and
-  /// IDAS 6 then writes past its data points (a fit crashed in IDASolveB so).
-  /// `last`: the segment may reach t_end, so pass 1 records its checkpoints, with
-  /// room for at most step_limit steps (5/4 of the longest segment so far: IDAS
-  /// allocates them up front).
-  struct SegmentPlan {
-    double t_stop;
-    long step_limit;
-    bool last;
-  };
-  SegmentPlan plan_segment(double t, long longest) const;
-
   void expand(double t, const double* y, const double* yp);
   /// A fresh integrator at (t, y) with the Φ quadrature attached: every forward
   /// pass of an evaluation is built here, so that they take identical steps. A

@@ -34,7 +34,6 @@ struct IdasIntegrator::Impl {
   SUNLinearSolver LS = nullptr;
   double t_solver = 0;  // internal time of IDAS
   bool checkpointing = false;
-  long step_limit = 0;
 
   // optional quadratures and forward sensitivities
   QuadratureRhs quad_rhs;
@@ -343,20 +342,12 @@ void* IdasIntegrator::sundials_context() const {
   return impl_->ctx;
 }
 
-void IdasIntegrator::limit_steps(long steps) {
-  impl_->step_limit = steps;
-}
-
-bool IdasIntegrator::at_step_limit() const {
-  return impl_->step_limit > 0 && impl_->stats.steps >= impl_->step_limit;
-}
-
 bool IdasIntegrator::advance_to(double tout, double t_stop) {
   Impl& m = *impl_;
   const int n = m.n;
   check(IDASetStopTime(m.mem, t_stop), "IDASetStopTime");
   // One step at a time, so that the order of every step can be counted.
-  while (m.t_solver < tout && !at_step_limit()) {
+  while (m.t_solver < tout) {
     if (m.stats.steps >= m.opt.max_steps) {
       // Most often the steps shrank because some element is collapsing: say which.
       IDAGetDky(m.mem, m.t_solver, 0, m.yout);

@@ -77,11 +77,6 @@ class IdasIntegrator {
   /// The SUNDIALS context, for vectors of a backward problem.
   void* sundials_context() const;
 
-  /// Stops advance_to() after `steps` steps of this integrator (0: no limit), at the
-  /// last step's time, which then is time(). at_step_limit() says it stopped there.
-  void limit_steps(long steps);
-  bool at_step_limit() const;
-
   /// Integrates until `tout` (never past `t_stop`), then interpolates the state at
   /// tout. Returns false on solver failure; error() then says why and at which time.
   bool advance_to(double tout, double t_stop);
