@@ -13,10 +13,10 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
+#include "bench/foam_cylinder.hpp"
 #include "drivers/fit_loop.hpp"
 #include "engine/error.hpp"
 #include "engine/simulation.hpp"
@@ -100,38 +100,27 @@ void print(const std::string& what, const FitTiming& t, const std::vector<std::s
   fmt::print("\n");
 }
 
-std::string read(const fs::path& p) {
-  std::ifstream in(p);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
-std::string replaced(std::string text, const std::string& from, const std::string& to) {
-  const size_t at = text.find(from);
-  if (at == std::string::npos) throw Error("bench_fit: the example no longer contains " + from);
-  return text.replace(at, from.size(), to);
-}
-
-/// The bundled foam cylinder fitted to `duration` s of its own simulated motion.
+/// The bundled foam cylinder fitted to `cylinder_duration` s of its own simulated
+/// motion, from 2×/½× of the example's λ, μ, ν.
 FitTiming cylinder_fit(const fs::path& dir, const Options& o) {
-  const fs::path examples = fs::path(KELVIN_SOURCE_DIR) / "yaml" / "examples";
-  fs::create_directories(dir);
-  fs::copy_file(examples / "foam-cylinder-markers.csv", dir / "foam-cylinder-markers.csv",
-                fs::copy_options::overwrite_existing);
-  const std::string end =
-      fmt::format("end: {}, output_rate: 180, vtu_rate: 0", o.cylinder_duration);
-  const std::string truth = replaced(read(examples / "foam-cylinder.yaml"),
-                                     "end: 1.0, output_rate: 180, vtu_rate: 30", end);
-  write(dir / "truth.yaml", truth);
+  Scenario truth =
+      load_scenario(std::string(KELVIN_SOURCE_DIR) + "/yaml/examples/foam-cylinder.yaml");
+  truth.time.end = o.cylinder_duration;
+  truth.time.output_rate = 180;
+  truth.time.vtu_rate = 0;
   SimulationOptions so;
-  so.outdir = (dir / "truth").string();
-  const SimulationResult r = run_simulation(load_scenario((dir / "truth.yaml").string()), so);
+  so.outdir = dir.string();
+  const SimulationResult r = run_simulation(truth, so);
   if (!r.completed) throw Error("cylinder truth simulation failed: " + r.error);
-  std::string fit = replaced(truth, "lambda: 1.0e4, mu: 2.0e4", "lambda: 2.0e4, mu: 1.0e4");
-  fit = replaced(fit, "nu: 12", "nu: 24");
-  fit = replaced(fit, "tolerance: 0.002 }",
-                 "tolerance: 0.002, observed: " + (dir / "truth" / "markers.csv").string() + " }");
-  write(dir / "fit.yaml", fit + "fit: { parameters: [elastic.lambda, elastic.mu, viscous.nu] }\n");
-  return time_fit(load_scenario((dir / "fit.yaml").string()), o.max_evaluations);
+  Scenario s = bench::observing(truth, dir.string());
+  s.material.elastic.params["lambda"] *= 2;
+  s.material.elastic.params["mu"] *= 0.5;
+  s.material.viscous->params["nu"] *= 2;
+  using Scope = FitParameterSpec::Scope;
+  s.fit.parameters = {bench::positive_parameter("elastic.lambda", Scope::Global),
+                      bench::positive_parameter("elastic.mu", Scope::Global),
+                      bench::positive_parameter("viscous.nu", Scope::Global)};
+  return time_fit(s, o.max_evaluations);
 }
 
 }  // namespace

@@ -40,16 +40,6 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-FitParameterSpec spec(const std::string& target, FitParameterSpec::Scope scope) {
-  FitParameterSpec s;
-  s.target = target;
-  s.scope = scope;
-  s.lower = 0;
-  s.upper = 1e300;
-  s.log = true;
-  return s;
-}
-
 /// Runs `job` in a child process and returns its wait status and resource use.
 /// The memory figures need a process per measurement; and no process may fork
 /// after CHOLMOD has started libgomp's thread pool (the child would wait forever
@@ -87,10 +77,7 @@ Scenario with_observations(double h, double T, const std::string& dir, bool fork
     ok = simulate() == 0;
   }
   if (!ok) throw Error("truth simulation failed");
-  Scenario s = truth;
-  s.path = dir + "/scenario.yaml";
-  s.markers.observed_path = dir + "/markers.csv";
-  s.markers.observed = read_marker_tracks(s.markers.observed_path);
+  Scenario s = bench::observing(truth, dir);
   s.material.elastic.params["mu"] *= 1.3;
   s.material.elastic.params["lambda"] *= 0.7;
   s.material.viscous->params["nu"] *= 1.3;
@@ -223,7 +210,7 @@ int main(int argc, char** argv) {
     const Scenario s = with_observations(h, duration, dir + "/cost", false);
     fmt::print("foam cylinder, h = {} mm: {} tets, {} dofs, {} s simulated, medians of {}\n",
                1e3 * h, s.mesh.num_tets(), 3 * s.mesh.num_nodes(), duration, repeat);
-    auto slabs = spec("elastic.mu", Scope::Boxes);
+    auto slabs = bench::positive_parameter("elastic.mu", Scope::Boxes);
     for (int k = 0; k + 1 < regions; ++k) {
       const double z0 = 0.2 * k / regions, z1 = 0.2 * (k + 1) / regions;
       slabs.boxes.push_back({Eigen::Vector3d(-1, -1, z0), Eigen::Vector3d(1, 1, z1)});
@@ -236,7 +223,7 @@ int main(int argc, char** argv) {
     const std::vector<Case> cases = {
         {"4 global", {}, fsa_max >= 4},
         {"regions", {slabs}, regions <= fsa_max},
-        {"per element", {spec("elastic.mu", Scope::PerElement)}, false},
+        {"per element", {bench::positive_parameter("elastic.mu", Scope::PerElement)}, false},
     };
     fmt::print(
         "| map | parameters | Φ alone (s) | Φ + adjoint (s) | ratio | backward/forward steps "

@@ -1,9 +1,10 @@
 #pragma once
 // The bundled foam cylinder (yaml/examples/foam-cylinder.yaml) re-meshed at another
-// element size, shared by the benchmarks.
+// element size, and fits to tracks simulated from it, shared by the benchmarks.
 #include <string>
 #include <vector>
 
+#include "engine/csv.hpp"
 #include "engine/markers.hpp"
 #include "engine/mesh.hpp"
 #include "engine/selection.hpp"
@@ -28,6 +29,29 @@ inline Scenario remeshed(const Scenario& base, double h) {
   s.markers.embedded = embed_markers(s.mesh, names, rest, 1e-3);
   s.time.end = 1.0;
   s.time.vtu_rate = 0;
+  return s;
+}
+
+/// `truth` observed: its marker tracks, simulated into dir/markers.csv, become the
+/// scenario's observations.
+inline Scenario observing(const Scenario& truth, const std::string& dir) {
+  Scenario s = truth;
+  s.path = dir + "/scenario.yaml";
+  s.markers.observed_path = dir + "/markers.csv";
+  s.markers.observed = read_marker_tracks(s.markers.observed_path);
+  return s;
+}
+
+/// A log-transformed, positive fit parameter (what the YAML loader gives a
+/// positive parameter by default).
+inline FitParameterSpec positive_parameter(const std::string& target,
+                                           FitParameterSpec::Scope scope) {
+  FitParameterSpec s;
+  s.target = target;
+  s.scope = scope;
+  s.lower = 0;
+  s.upper = 1e300;
+  s.log = true;
   return s;
 }
 

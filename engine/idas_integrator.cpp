@@ -407,7 +407,8 @@ double IdasIntegrator::restart_step() const {
   double h = 0;
   if (IDAGetDky(m.mem, t_, 2, ydd) == IDA_SUCCESS && IDAGetErrWeights(m.mem, w) == IDA_SUCCESS) {
     const double norm = N_VWrmsNorm(ydd, w);
-    if (norm > 0 && std::isfinite(norm)) h = std::sqrt(2 * 0.25 / norm);
+    constexpr double kErrorShare = 0.25;  // of the tolerance, for the first step's ½h²‖ÿ‖
+    if (norm > 0 && std::isfinite(norm)) h = std::sqrt(2 * kErrorShare / norm);
   }
   N_VDestroy(ydd);
   N_VDestroy(w);
