@@ -116,10 +116,8 @@ FitTiming cylinder_fit(const fs::path& dir, const Options& o) {
   s.material.elastic.params["lambda"] *= 2;
   s.material.elastic.params["mu"] *= 0.5;
   s.material.viscous->params["nu"] *= 2;
-  using Scope = FitParameterSpec::Scope;
-  s.fit.parameters = {bench::positive_parameter("elastic.lambda", Scope::Global),
-                      bench::positive_parameter("elastic.mu", Scope::Global),
-                      bench::positive_parameter("viscous.nu", Scope::Global)};
+  s.fit.parameters = {positive_fit_parameter("elastic.lambda"),
+                      positive_fit_parameter("elastic.mu"), positive_fit_parameter("viscous.nu")};
   return time_fit(s, o.max_evaluations);
 }
 

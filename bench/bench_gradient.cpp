@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
     const Scenario s = with_observations(h, duration, dir + "/cost", false);
     fmt::print("foam cylinder, h = {} mm: {} tets, {} dofs, {} s simulated, medians of {}\n",
                1e3 * h, s.mesh.num_tets(), 3 * s.mesh.num_nodes(), duration, repeat);
-    auto slabs = bench::positive_parameter("elastic.mu", Scope::Boxes);
+    auto slabs = positive_fit_parameter("elastic.mu", Scope::Boxes);
     for (int k = 0; k + 1 < regions; ++k) {
       const double z0 = 0.2 * k / regions, z1 = 0.2 * (k + 1) / regions;
       slabs.boxes.push_back({Eigen::Vector3d(-1, -1, z0), Eigen::Vector3d(1, 1, z1)});
@@ -223,7 +223,7 @@ int main(int argc, char** argv) {
     const std::vector<Case> cases = {
         {"4 global", {}, fsa_max >= 4},
         {"regions", {slabs}, regions <= fsa_max},
-        {"per element", {bench::positive_parameter("elastic.mu", Scope::PerElement)}, false},
+        {"per element", {positive_fit_parameter("elastic.mu", Scope::PerElement)}, false},
     };
     fmt::print(
         "| map | parameters | Φ alone (s) | Φ + adjoint (s) | ratio | backward/forward steps "

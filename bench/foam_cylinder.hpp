@@ -42,17 +42,4 @@ inline Scenario observing(const Scenario& truth, const std::string& dir) {
   return s;
 }
 
-/// A log-transformed, positive fit parameter (what the YAML loader gives a
-/// positive parameter by default).
-inline FitParameterSpec positive_parameter(const std::string& target,
-                                           FitParameterSpec::Scope scope) {
-  FitParameterSpec s;
-  s.target = target;
-  s.scope = scope;
-  s.lower = 0;
-  s.upper = 1e300;
-  s.log = true;
-  return s;
-}
-
 }  // namespace kelvin::bench

@@ -79,13 +79,7 @@ Scenario fit_scenario(const fs::path& dir, const std::string& material, const st
 
 FitParameterSpec param(const std::string& target,
                        FitParameterSpec::Scope scope = FitParameterSpec::Scope::Global) {
-  FitParameterSpec s;
-  s.target = target;
-  s.scope = scope;
-  s.lower = 0;
-  s.upper = 1e300;
-  s.log = true;
-  return s;
+  return positive_fit_parameter(target, scope);
 }
 
 void expect_methods_agree(const GradientCheckReport& r) {

@@ -48,18 +48,9 @@ const std::string kStart = R"(
   elastic: { model: neo-hookean, lambda: 2.6e5, mu: 0.8e5 }
   viscous: { model: power-law, nu: 30, h: 0.9 })";
 
-FitParameterSpec param(const std::string& target) {
-  FitParameterSpec s;
-  s.target = target;
-  s.lower = 0;
-  s.upper = 1e300;
-  s.log = true;
-  return s;
-}
-
 std::vector<FitParameterSpec> params(const std::vector<std::string>& targets) {
   std::vector<FitParameterSpec> out;
-  for (const auto& t : targets) out.push_back(param(t));
+  for (const auto& t : targets) out.push_back(positive_fit_parameter(t));
   return out;
 }
 
@@ -246,7 +237,7 @@ TEST_F(MarkerTrajectoryTest, PerElementFieldsAreNotComputed) {
   yaml.replace(yaml.find("element_size: 0.01"), 18, "element_size: 0.005");
   std::ofstream(dir_ / "fine.yaml") << yaml;
   const Scenario s = load_scenario((dir_ / "fine.yaml").string());
-  FitParameterSpec field = param("elastic.mu");
+  FitParameterSpec field = positive_fit_parameter("elastic.mu");
   field.scope = FitParameterSpec::Scope::PerElement;
   FitProblem problem(s, {field});
   ASSERT_GT(problem.map().size(), 200);

@@ -86,6 +86,19 @@ struct FitParameterSpec {
   int line = 0;                 // 1-based line in the scenario file, for messages
 };
 
+/// A log-transformed fit parameter bounded only below by 0 (what the loader gives
+/// a strictly positive parameter by default), for fits set up in code.
+inline FitParameterSpec positive_fit_parameter(
+    const std::string& target, FitParameterSpec::Scope scope = FitParameterSpec::Scope::Global) {
+  FitParameterSpec s;
+  s.target = target;
+  s.scope = scope;
+  s.lower = 0;
+  s.upper = 1e300;
+  s.log = true;
+  return s;
+}
+
 /// The marker misfit Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ − x̄ᵢ‖² dt over a time window.
 struct ObjectiveSpec {
   std::map<std::string, double> weights;  // marker name → wᵢ (1 when absent; 0 drops it)
