@@ -7,9 +7,11 @@
 // is the integral term itself.
 //
 // Segments: the forward pass stores one state per segment boundary (in a temporary
-// file, see BoundaryStates); each segment is
-// then re-integrated from its start with checkpoints and solved backward, λ being
+// file, see BoundaryStates); each segment is then re-integrated from its start,
+// storing the Hermite points of all its steps, and solved backward, λ being
 // continuous across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺)).
+// Segments take the place of IDAS's own checkpoints within a run (see below); their
+// length is fixed per experiment (Experiment::segment_length).
 // The forward model restarts at the same boundaries in every pass, so the gradient
 // is exact for the trajectory whose Φ is reported.
 #include <fmt/format.h>
@@ -283,59 +285,69 @@ class BoundaryStates {
 
 void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   const int n = run.n;
+  const bool planning = run.planning();
   const std::vector<double> T = run.boundaries();
   const int segments = static_cast<int>(T.size()) - 1;
   result.segments = segments;
-  const long nd =
-      run.opt.checkpoint_steps > 0 ? run.opt.checkpoint_steps : default_checkpoint_steps(2 * n);
+  const long budget = run.checkpoint_budget();
 
-  // Pass 1 (only with several segments): Φ and the state at every boundary, with
-  // the first step each restart takes (pass 2 must retrace pass 1's steps exactly).
+  // Pass 1 (only with several segments): Φ and the state at every boundary but the
+  // last, with the first step each restart takes (pass 2 retraces pass 1's steps).
   BoundaryStates boundaries(run.x0.size());
   boundaries.push(run.x0, run.v0);
-  Eigen::VectorXd x = run.x0, v = run.v0;
   std::vector<long> segment_steps;
   std::vector<double> first_steps{0.0};
   result.phi_per_marker.setZero(run.objective.num_markers());
-  if (segments > 1) {
-    for (int k = 0; k + 1 < segments; ++k) {
-      auto integ = run.start(T[k], x, v, first_steps[k]);
-      const bool ok = run.advance(*integ, T[k + 1], result);
-      result.phi_per_marker += integ->quadrature();
-      result.forward_stats.steps += integ->stats().steps;
-      segment_steps.push_back(integ->stats().steps);
-      if (!ok) return;
-      x = integ->positions();
-      v = integ->velocities();
-      boundaries.push(x, v);
-      first_steps.push_back(integ->restart_step());
-    }
-  }
+  if (!run.integrate_segments(T, segments - 1, result, [&](int, IdasIntegrator& integ) {
+        boundaries.push(integ.positions(), integ.velocities());
+        segment_steps.push_back(integ.stats().steps);
+        first_steps.push_back(integ.restart_step());
+      }))
+    return;
 
   const int ns = static_cast<int>(run.deriv.slots().size());
   const int ne = run.model.mesh().num_tets();
   result.dphi_dq.setZero(ns, ne);
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
+  Eigen::VectorXd x, v;
   for (int k = segments - 1; k >= 0; --k) {
     boundaries.get(k, x, v);
-    auto integ = run.start(T[k], x, v, first_steps[k]);
-    // IDAS allocates the Hermite points of a whole checkpoint interval up front.
-    // Pass 1 counted each segment's steps (the last one's is estimated from the
-    // others), so a segment gets no more points than it needs: short segments then
-    // keep the adjoint's memory near the forward run's, which is what they are for.
-    long nd_k = nd;
+    // Every segment is ONE IDAS checkpoint interval. With several, IDASolveB
+    // re-integrates each interval from its checkpoint with a fresh Newton matrix;
+    // that run can take more steps than the forward one did, and IDAS 6 then
+    // stores Hermite points past the end of its array (a crash seen in long fits).
+    // Pass 1 counted the steps of every segment but the last, whose count is
+    // estimated from the others. A segment that still overruns is integrated again
+    // with more room; in one interval it retraces pass 1's steps exactly, but the
+    // overrunning run itself took other steps (creating an IDAS checkpoint changes
+    // the stepping: 2047 instead of 2176 steps on test_gradients' bar), so the room
+    // grows by a quarter over its count.
+    long points = budget;
     if (k + 1 < segments)
-      nd_k = std::min(nd, segment_steps[k] + 8);
+      points = segment_steps[k] + 8;
     else if (!segment_steps.empty())
-      nd_k =
-          std::min(nd, *std::max_element(segment_steps.begin(), segment_steps.end()) * 5 / 4 + 8);
-    integ->record_checkpoints(nd_k);
-    const bool ok = run.advance(*integ, T[k + 1], result);
-    const IntegratorStats st = integ->stats();
-    result.forward_stats.steps += st.steps;
-    if (k == segments - 1) result.phi_per_marker += integ->quadrature();
-    if (!ok) return;
-    if (k == segments - 1) run.set_adjoint_scale(result.phi_per_marker);
+      points = *std::max_element(segment_steps.begin(), segment_steps.end()) * 5 / 4 + 8;
+    std::unique_ptr<IdasIntegrator> integ;
+    for (;;) {
+      integ = run.start(T[k], x, v, first_steps[k]);
+      integ->record_checkpoints(points);
+      const bool ok = run.advance(*integ, T[k + 1], result);
+      const long steps = integ->stats().steps;
+      result.forward_stats.steps += steps;
+      if (!ok) return;
+      if (steps < points) break;
+      if (planning && run.ex.plan_segments(steps, budget, run.t_end - run.t0)) {
+        result = ExperimentResult{};
+        evaluate_adjoint(run, result);
+        return;
+      }
+      points = std::max(points, steps) * 5 / 4 + 8;
+    }
+    if (planning) run.ex.plan_segments(integ->stats().steps, budget, run.t_end - run.t0);
+    if (k == segments - 1) {
+      result.phi_per_marker += integ->quadrature();
+      run.set_adjoint_scale(result.phi_per_marker);
+    }
     if (!backward_segment(run, *integ, T[k], T[k + 1], lambda, result.dphi_dq, result)) return;
   }
 

@@ -96,15 +96,47 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
   initial_state(ex.scenario(), model, x0, v0);
 }
 
+bool Experiment::plan_segments(long steps, long budget, double duration) {
+  if (steps < budget) {
+    segment_ = 0;
+    return false;
+  }
+  const long per_segment = std::max(budget / 2, 1L);
+  segment_ = duration / static_cast<double>((steps + per_segment - 1) / per_segment);
+  return true;
+}
+
 std::vector<double> ExperimentRun::boundaries() const {
   std::vector<double> b{t0};
-  if (opt.segment > 0) {
-    const int segments =
-        std::max(1, static_cast<int>(std::ceil((t_end - t0) / opt.segment - 1e-9)));
-    for (int k = 1; k < segments; ++k) b.push_back(t0 + k * opt.segment);
+  if (const double length = ex.segment_length(opt.segment); length > 0) {
+    const int segments = std::max(1, static_cast<int>(std::ceil((t_end - t0) / length - 1e-9)));
+    for (int k = 1; k < segments; ++k) b.push_back(t0 + k * length);
   }
   b.push_back(t_end);
   return b;
+}
+
+long ExperimentRun::checkpoint_budget() const {
+  return opt.checkpoint_steps > 0 ? opt.checkpoint_steps : default_checkpoint_steps(2 * n);
+}
+
+bool ExperimentRun::integrate_segments(
+    const std::vector<double>& T, int count, ExperimentResult& result,
+    const std::function<void(int, IdasIntegrator&)>& segment_done) {
+  Eigen::VectorXd xk = x0, vk = v0;
+  double first_step = 0;
+  for (int k = 0; k < count; ++k) {
+    auto integ = start(T[k], xk, vk, first_step);
+    const bool ok = advance(*integ, T[k + 1], result);
+    result.phi_per_marker += integ->quadrature();
+    result.forward_stats.steps += integ->stats().steps;
+    if (!ok) return false;
+    xk = integ->positions();
+    vk = integ->velocities();
+    first_step = integ->restart_step();
+    if (segment_done) segment_done(k, *integ);
+  }
+  return true;
 }
 
 void ExperimentRun::expand(double t, const double* y, const double* yp) {
@@ -222,21 +254,16 @@ void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
 
 void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
   // Segmented like the adjoint, so that Φ belongs to the same trajectory.
+  const bool planning = run.planning();
   const std::vector<double> T = run.boundaries();
   result.segments = static_cast<int>(T.size()) - 1;
-  Eigen::VectorXd xk = run.x0, vk = run.v0;
-  double first_step = 0;
   result.phi_per_marker.setZero(run.objective.num_markers());
-  for (size_t k = 0; k + 1 < T.size(); ++k) {
-    auto integ = run.start(T[k], xk, vk, first_step);
-    const bool ok = run.advance(*integ, T[k + 1], result);
-    result.phi_per_marker += integ->quadrature();
-    const IntegratorStats st = integ->stats();
-    result.forward_stats.steps += st.steps;
-    if (!ok) return;
-    xk = integ->positions();
-    vk = integ->velocities();
-    first_step = integ->restart_step();
+  if (!run.integrate_segments(T, result.segments, result)) return;
+  if (planning && run.ex.plan_segments(result.forward_stats.steps, run.checkpoint_budget(),
+                                       run.t_end - run.t0)) {
+    result = ExperimentResult{};
+    evaluate_objective(run, result);
+    return;
   }
   result.ok = true;
 }

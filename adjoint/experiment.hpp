@@ -25,8 +25,10 @@ const char* to_string(GradientMethod m);
 
 struct GradientOptions {
   GradientMethod method = GradientMethod::kAdjoint;
-  long checkpoint_steps = 0;   // IDAS steps between checkpoints; 0 = default
-  double segment = 0;          // simulated seconds per adjoint segment; 0 = one segment
+  /// Most IDAS steps whose Hermite points one adjoint segment stores; 0 = default.
+  /// Automatic segments are sized to half of it (see Experiment::plan_segments).
+  long checkpoint_steps = 0;
+  double segment = 0;          // simulated seconds per adjoint segment; 0 = automatic
   double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit tightens it)
   /// An experiment whose forward run takes more IDAS steps than this fails
   /// (0: no limit). The fit bounds its line-search trials so (see run_fit).
@@ -34,13 +36,12 @@ struct GradientOptions {
   const std::atomic<bool>* interrupt = nullptr;
 };
 
-/// Default checkpoint interval (steps) for a state of `state_size` entries. IDAS
-/// allocates Nd Hermite points (y and y', 16 bytes per entry each) up front and
-/// re-integrates every checkpoint interval but the last before solving it backward,
-/// so Nd trades that recomputation against memory. On the 720-tet foam cylinder
-/// (0.1 s, 583 steps, bench_gradient) Φ + adjoint over Φ was 4.8 at Nd = 100,
-/// 4.5 at 300 and 3.9 at 1000 (one interval), and 9.0 at 10⁵ (the allocation
-/// alone). The budget keeps the points under 16 MiB; segments bound long runs.
+/// Default checkpoint budget (steps) for a state of `state_size` entries. IDAS
+/// allocates Nd Hermite points (y and y', 16 bytes per entry each) up front, so Nd
+/// trades restarts against memory. On the 720-tet foam cylinder (0.1 s, 583 steps,
+/// bench_gradient, when IDAS still checkpointed within a run) Φ + adjoint over Φ
+/// was 4.8 at Nd = 100, 4.5 at 300 and 3.9 at 1000 (one interval), and 9.0 at 10⁵
+/// (the allocation alone). The budget keeps the points under 16 MiB.
 inline long default_checkpoint_steps(int state_size) {
   const long per_point = 16L * std::max(state_size, 1);
   return std::clamp((16L << 20) / per_point, 50L, 1000L);
@@ -76,10 +77,24 @@ class Experiment {
   ExperimentResult evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
                             const GradientOptions& options);
 
+  /// Simulated seconds per segment, the same for every evaluation of this
+  /// experiment: boundaries that moved with the parameters would make Φ rough, and
+  /// a fit would stall on it. `option` > 0 is used as given; 0 means automatic,
+  /// chosen at the first evaluation that completes (plan_segments). Returns 0 for
+  /// one segment, and while the automatic choice is still open.
+  double segment_length(double option) const { return option > 0 ? option : segment_; }
+  bool segments_planned(double option) const { return option > 0 || segment_ >= 0; }
+  /// Fixes the automatic plan after an unsegmented run of `steps` steps over
+  /// `duration`: one segment if the run fits the checkpoint budget, otherwise equal
+  /// segments of about half the budget each (the margin lets trial parameters
+  /// that need more steps still fit). True when the run must be redone in segments.
+  bool plan_segments(long steps, long budget, double duration);
+
  private:
   const Scenario& scenario_;
   std::unique_ptr<FemModel> model_;
   MarkerObjective objective_;
+  double segment_ = -1;  // automatic segment length; < 0 until planned
 };
 
 }  // namespace kelvin

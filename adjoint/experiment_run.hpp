@@ -4,6 +4,7 @@
 /// shares between the objective run, forward sensitivities and the adjoint.
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
+#include <functional>
 #include <optional>
 
 #include "adjoint/experiment.hpp"
@@ -29,8 +30,13 @@ struct ExperimentRun {
   Eigen::VectorXd x0, v0;
   Eigen::Matrix3Xd x, v, a;  // full nodal fields of the last expand()
 
-  /// Segment boundaries t0 = T₀ < … < T_S = t_end.
+  /// Segment boundaries t0 = T₀ < … < T_S = t_end (one segment while the
+  /// experiment's automatic plan is open: that run then decides it).
   std::vector<double> boundaries() const;
+  /// Most steps one segment's Hermite points may hold (GradientOptions::checkpoint_steps).
+  long checkpoint_budget() const;
+  /// True when this evaluation decides the experiment's automatic segment plan.
+  bool planning() const { return !ex.segments_planned(opt.segment); }
 
   void expand(double t, const double* y, const double* yp);
   /// A fresh integrator at (t, y) with the Φ quadrature attached: every forward
@@ -43,6 +49,11 @@ struct ExperimentRun {
   /// fresh from start() at t₀, and returns their initial values yS0 (2n × p.size()):
   /// forward-sensitivity gradients and marker sensitivities share this one setup.
   Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ);
+  /// Integrates segments 0 … count−1 of T from (x₀, v₀), each restarted with the
+  /// first step its predecessor proposed, and adds their Φ and steps to `result`;
+  /// `segment_done(k, integ)` sees every finished segment. False on failure.
+  bool integrate_segments(const std::vector<double>& T, int count, ExperimentResult& result,
+                          const std::function<void(int, IdasIntegrator&)>& segment_done = {});
   /// Integrates to t1; false (with result.error, t_reached) on failure or interrupt.
   /// IDAS never steps past t_stop (default t1); a later t_stop keeps the steps of a
   /// run to t_stop and interpolates the state at t1.

@@ -147,6 +147,79 @@ TEST(Gradients, SegmentedAdjointMatchesSingleSegment) {
   EXPECT_DOUBLE_EQ(c.phi, b.phi);
 }
 
+// Without a segment length, an experiment's first evaluation chooses one from its
+// step count and keeps it: later evaluations at other parameters, and Φ alone,
+// restart at the same times, so Φ stays one smooth function of the parameters.
+TEST(Gradients, AutomaticSegmentsAreChosenOnceFromTheFirstRun) {
+  const fs::path dir = scratch("auto-segments");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  const std::vector<FitParameterSpec> specs = {param("elastic.lambda"), param("elastic.mu"),
+                                               param("viscous.nu")};
+  FitProblem reference(s, specs);
+  const Eigen::VectorXd p = reference.map().initial();
+  GradientOptions roomy;
+  roomy.checkpoint_steps = 100000;
+  const Evaluation one = reference.evaluate(p, roomy);
+  ASSERT_TRUE(one.ok) << one.error;
+  ASSERT_EQ(one.experiments[0].segments, 1);
+  const long steps = one.experiments[0].forward_stats.steps;
+
+  // A budget of a third of the run: segments of at most a sixth of its steps.
+  GradientOptions tight;
+  tight.checkpoint_steps = steps / 3;
+  FitProblem problem(s, specs);
+  const Evaluation a = problem.evaluate(p, tight);
+  ASSERT_TRUE(a.ok) << a.error;
+  const int segments = a.experiments[0].segments;
+  EXPECT_GE(segments, 6);
+  EXPECT_LE(segments, 8);
+  EXPECT_LT((a.gradient - one.gradient).norm() / one.gradient.norm(), 1e-8);
+
+  // The same boundaries as an explicit segment length of T / segments.
+  GradientOptions explicit_length;
+  explicit_length.segment = s.time.end / segments;
+  const Evaluation b = problem.evaluate(p, explicit_length);
+  ASSERT_TRUE(b.ok) << b.error;
+  EXPECT_EQ(b.experiments[0].segments, segments);
+  EXPECT_EQ(a.phi, b.phi);
+  EXPECT_EQ((a.gradient - b.gradient).norm(), 0.0);
+
+  // Stiffer trial parameters take other steps but keep the plan.
+  Eigen::VectorXd stiffer = p;
+  stiffer.array() += std::log(1.5);  // log-transformed parameters
+  GradientOptions phi_only = tight;
+  phi_only.method = GradientMethod::kNone;
+  const Evaluation c = problem.evaluate(stiffer, phi_only);
+  ASSERT_TRUE(c.ok) << c.error;
+  EXPECT_EQ(c.experiments[0].segments, segments);
+  GradientOptions stiffer_explicit = explicit_length;
+  stiffer_explicit.method = GradientMethod::kNone;
+  EXPECT_EQ(problem.evaluate(stiffer, stiffer_explicit).phi, c.phi);
+}
+
+// One segment is one IDAS checkpoint interval. When a run needs more steps than
+// the interval was given, it is integrated again with room for all of them, and
+// the gradient is exactly the one of a run that had the room from the start.
+TEST(Gradients, SegmentThatOutgrowsItsCheckpointBudgetIsRedoneExactly) {
+  const fs::path dir = scratch("overrun");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  FitProblem problem(s, {param("elastic.lambda"), param("viscous.nu")});
+  const Eigen::VectorXd p = problem.map().initial();
+  GradientOptions roomy, cramped;
+  roomy.segment = cramped.segment = s.time.end;  // explicitly one segment
+  roomy.checkpoint_steps = 100000;
+  const Evaluation a = problem.evaluate(p, roomy);
+  ASSERT_TRUE(a.ok) << a.error;
+  const long steps = a.experiments[0].forward_stats.steps;
+  cramped.checkpoint_steps = steps / 4;
+  const Evaluation b = problem.evaluate(p, cramped);
+  ASSERT_TRUE(b.ok) << b.error;
+  EXPECT_GT(b.experiments[0].forward_stats.steps, steps + steps / 4);  // tries, then the redo
+  EXPECT_EQ(b.experiments[0].backward_steps, a.experiments[0].backward_steps);
+  EXPECT_EQ(a.phi, b.phi);
+  EXPECT_EQ((a.gradient - b.gradient).norm(), 0.0);
+}
+
 // The fit bounds each line-search trial's steps: past the limit the evaluation
 // fails (and says where it stopped) instead of running on, for every method.
 TEST(Gradients, StepLimitFailsTheEvaluationAndSaysWhere) {
