@@ -337,6 +337,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       if (!ok) return;
       if (steps < points) break;
       if (planning && run.ex.plan_segments(steps, budget, run.t_end - run.t0)) {
+        integ.reset();  // its Hermite points are the budget's worth of memory
         result = ExperimentResult{};
         evaluate_adjoint(run, result);
         return;

@@ -5,8 +5,9 @@
 // ~100 region parameters (slabs along the axis) and one parameter per element;
 // forward sensitivities for comparison (their cost grows with the count).
 // Memory: peak resident memory of one evaluation (each in a forked child, so the
-// peaks do not mix) for 1×, 10×, 100× the base duration: Φ alone, the adjoint with
-// one IDAS checkpointed segment, and the segment-wise adjoint.
+// peaks do not mix) for 1×, 10×, 100× the base duration: Φ alone (one run, no
+// segments), the adjoint with its default automatic segments, and with segments of
+// a given length.
 //
 //   build/bin/bench_gradient [--h 0.01] [--duration 0.1] [--repeat 3]
 //                            [--regions 100] [--memory-base 0.05] [--segment 0.05]
@@ -87,6 +88,7 @@ Scenario with_observations(double h, double T, const std::string& dir, bool fork
 struct Timing {
   double seconds;
   long steps, backward_steps;
+  int segments;
 };
 
 Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat) {
@@ -99,17 +101,21 @@ Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat) {
     if (!e.ok) throw Error(e.error);
     t.push_back(e.seconds);
   }
-  return {median(t), e.experiments[0].forward_stats.steps, e.experiments[0].backward_steps};
+  return {median(t), e.experiments[0].forward_stats.steps, e.experiments[0].backward_steps,
+          e.experiments[0].segments};
 }
 
 /// Peak resident memory and wall time of one evaluation, run in a child process.
+/// `evaluations` > 1 times the last one (the first of an experiment with automatic
+/// segments also plans them, see Experiment::plan_segments).
 struct Footprint {
   double mib = 0, seconds = 0;
   long steps = -1;
+  int segments = 0;
 };
 
 Footprint footprint(const Scenario& s, const std::vector<FitParameterSpec>& specs,
-                    GradientOptions o) {
+                    GradientOptions o, int evaluations = 1) {
   int pipefd[2];
   if (pipe(pipefd) != 0) throw Error("pipe failed");
   int status = 0;
@@ -117,10 +123,12 @@ Footprint footprint(const Scenario& s, const std::vector<FitParameterSpec>& spec
       [&] {
         close(pipefd[0]);
         FitProblem problem(s, specs);
-        const Evaluation e = problem.evaluate(problem.map().initial(), o);
+        Evaluation e;
+        for (int k = 0; k < evaluations; ++k) e = problem.evaluate(problem.map().initial(), o);
         Footprint f;
         f.seconds = e.seconds;
         f.steps = e.ok ? e.experiments[0].forward_stats.steps : -1;
+        f.segments = e.ok ? e.experiments[0].segments : 0;
         if (write(pipefd[1], &f, sizeof f) != sizeof f) return 2;
         return e.ok ? 0 : 1;
       },
@@ -184,25 +192,27 @@ int main(int argc, char** argv) {
     const double longest = *std::max_element(factors.begin(), factors.end());
     const Scenario s = with_observations(h, longest * memory_base, dir + "/memory", true);
     fmt::print(
-        "\npeak resident memory (MiB), h = {} mm, 4 global parameters, segments of {} s, "
-        "checkpoints every ≤ {} steps\n",
-        1e3 * h, segment, default_checkpoint_steps(6 * s.mesh.num_nodes()));
+        "\npeak resident memory (MiB), h = {} mm, 4 global parameters; automatic segments "
+        "of ≤ {} steps; given segments of {} s\n",
+        1e3 * h, default_checkpoint_steps(6 * s.mesh.num_nodes()) / 2, segment);
     fmt::print(
-        "| duration (s) | steps | Φ alone | adjoint, one segment | adjoint, segments "
-        "| segments / Φ | time: one segment / Φ | segments / Φ |\n"
-        "|---|---|---|---|---|---|---|---|\n");
+        "| duration (s) | steps | Φ alone | adjoint, automatic (segments) | adjoint, given "
+        "segments | automatic / Φ | given / Φ | time: automatic / Φ | given / Φ |\n"
+        "|---|---|---|---|---|---|---|---|---|\n");
     for (double factor : factors) {
       Scenario sc = s;
       sc.time.end = memory_base * factor;
-      GradientOptions none, single, segmented;
+      GradientOptions none, automatic, given;
       none.method = GradientMethod::kNone;
-      segmented.segment = segment;
+      none.segment = sc.time.end;  // one run from t₀, nothing to plan
+      given.segment = segment;
       const Footprint f0 = footprint(sc, {}, none);
-      const Footprint f1 = footprint(sc, {}, single);
-      const Footprint f2 = footprint(sc, {}, segmented);
-      fmt::print("| {:g} | {} | {:.1f} | {:.1f} | {:.1f} | {:.2f} | {:.2f} | {:.2f} |\n",
-                 sc.time.end, f0.steps, f0.mib, f1.mib, f2.mib, f2.mib / f0.mib,
-                 f1.seconds / f0.seconds, f2.seconds / f0.seconds);
+      const Footprint f1 = footprint(sc, {}, automatic, 2);
+      const Footprint f2 = footprint(sc, {}, given);
+      fmt::print(
+          "| {:g} | {} | {:.1f} | {:.1f} ({}) | {:.1f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} |\n",
+          sc.time.end, f0.steps, f0.mib, f1.mib, f1.segments, f2.mib, f1.mib / f0.mib,
+          f2.mib / f0.mib, f1.seconds / f0.seconds, f2.seconds / f0.seconds);
       std::fflush(stdout);
     }
   }
@@ -227,9 +237,11 @@ int main(int argc, char** argv) {
     };
     fmt::print(
         "| map | parameters | Φ alone (s) | Φ + adjoint (s) | ratio | backward/forward steps "
-        "| Φ + forward sens. (s) | ratio |\n|---|---|---|---|---|---|---|---|\n");
+        "| segments | Φ + forward sens. (s) | ratio |\n|---|---|---|---|---|---|---|---|---|\n");
     for (const auto& c : cases) {
       FitProblem problem(s, c.specs);
+      // Untimed: the first evaluation also chooses the automatic segments.
+      time_evaluation(problem, GradientMethod::kNone, 1);
       const Timing f = time_evaluation(problem, GradientMethod::kNone, repeat);
       const Timing a = time_evaluation(problem, GradientMethod::kAdjoint, repeat);
       std::string fwd = "- | -";
@@ -237,9 +249,9 @@ int main(int argc, char** argv) {
         const Timing t = time_evaluation(problem, GradientMethod::kForward, 1);
         fwd = fmt::format("{:.3g} | {:.2f}", t.seconds, t.seconds / f.seconds);
       }
-      fmt::print("| {} | {} | {:.3g} | {:.3g} | {:.2f} | {}/{} | {} |\n", c.name,
+      fmt::print("| {} | {} | {:.3g} | {:.3g} | {:.2f} | {}/{} | {} | {} |\n", c.name,
                  problem.map().size(), f.seconds, a.seconds, a.seconds / f.seconds,
-                 a.backward_steps, f.steps, fwd);
+                 a.backward_steps, f.steps, a.segments, fwd);
       std::fflush(stdout);
     }
   }

@@ -38,8 +38,9 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
   cmd->add_option("--fd-tolerance", args->fd_tolerance,
                   "allowed adjoint vs finite-difference relative error")
       ->capture_default_str();
-  cmd->add_option("--segment", args->segment, "adjoint segment length (s); 0 = one segment");
-  cmd->add_option("--checkpoint-steps", args->checkpoint_steps, "IDAS steps between checkpoints");
+  cmd->add_option("--segment", args->segment, "adjoint segment length (s); 0 = automatic");
+  cmd->add_option("--checkpoint-steps", args->checkpoint_steps,
+                  "most IDAS steps one adjoint segment stores");
   cmd->add_option("--seed", args->seed, "seed of the random direction")->capture_default_str();
   cmd->add_option("--fd-step", args->fd_step,
                   "central-difference step (relative for log parameters); long oscillatory "

@@ -118,8 +118,8 @@ struct FitSpec {
   double smoothness = 0;                 // γ of the per-element smoothness term
   std::vector<double> lcurve;            // γ values of an L-curve sweep (empty = none)
   std::vector<std::string> experiments;  // further scenario files fitted jointly
-  int checkpoint_steps = 0;              // IDAS steps between adjoint checkpoints; 0 = default
-  double segment = 0;                    // s per adjoint segment; 0 = a single segment
+  int checkpoint_steps = 0;              // most steps one adjoint segment stores; 0 = default
+  double segment = 0;                    // s per adjoint segment; 0 = automatic
 };
 
 struct Scenario {
