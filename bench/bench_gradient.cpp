@@ -12,7 +12,8 @@
 //   build/bin/bench_gradient [--h 0.01] [--duration 0.1] [--repeat 3]
 //                            [--regions 100] [--memory-base 0.05] [--segment 0.05]
 //                            [--skip-cost] [--skip-memory] [--fsa-max 100]
-//                            [--memory-factors 1,10,100]
+//                            [--memory-factors 1,10,100] [--checkpoint-steps N]
+// --checkpoint-steps: the cost table's checkpoint budget (GradientOptions); 0 = default.
 // --fsa-max: forward sensitivities are timed only for maps with at most this many
 // parameters (their cost grows with the count; at ≥ 8k tets 100 of them take hours).
 #include <fmt/format.h>
@@ -91,9 +92,11 @@ struct Timing {
   int segments;
 };
 
-Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat) {
+Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat,
+                       long checkpoint_steps) {
   GradientOptions o;
   o.method = method;
+  o.checkpoint_steps = checkpoint_steps;
   std::vector<double> t;
   Evaluation e;
   for (int k = 0; k < repeat; ++k) {
@@ -146,6 +149,7 @@ Footprint footprint(const Scenario& s, const std::vector<FitParameterSpec>& spec
 int main(int argc, char** argv) {
   double h = 0.01, duration = 0.1, memory_base = 0.05, segment = 0.05;
   int repeat = 3, regions = 100, fsa_max = 100;
+  long checkpoint_steps = 0;
   bool cost = true, memory = true;
   std::vector<double> factors = {1, 10, 100};
   for (int i = 1; i < argc; ++i) {
@@ -163,6 +167,8 @@ int main(int argc, char** argv) {
       memory_base = next();
     else if (a == "--segment")
       segment = next();
+    else if (a == "--checkpoint-steps")
+      checkpoint_steps = static_cast<long>(next());
     else if (a == "--fsa-max")
       fsa_max = static_cast<int>(next());
     else if (a == "--memory-factors") {
@@ -241,12 +247,12 @@ int main(int argc, char** argv) {
     for (const auto& c : cases) {
       FitProblem problem(s, c.specs);
       // Untimed: the first evaluation also chooses the automatic segments.
-      time_evaluation(problem, GradientMethod::kNone, 1);
-      const Timing f = time_evaluation(problem, GradientMethod::kNone, repeat);
-      const Timing a = time_evaluation(problem, GradientMethod::kAdjoint, repeat);
+      time_evaluation(problem, GradientMethod::kNone, 1, checkpoint_steps);
+      const Timing f = time_evaluation(problem, GradientMethod::kNone, repeat, checkpoint_steps);
+      const Timing a = time_evaluation(problem, GradientMethod::kAdjoint, repeat, checkpoint_steps);
       std::string fwd = "- | -";
       if (c.forward) {
-        const Timing t = time_evaluation(problem, GradientMethod::kForward, 1);
+        const Timing t = time_evaluation(problem, GradientMethod::kForward, 1, checkpoint_steps);
         fwd = fmt::format("{:.3g} | {:.2f}", t.seconds, t.seconds / f.seconds);
       }
       fmt::print("| {} | {} | {:.3g} | {:.3g} | {:.2f} | {}/{} | {} | {} |\n", c.name,
