@@ -45,17 +45,32 @@ MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
 }
 
 Eigen::Vector3d MarkerObjective::frame_slope(int i, size_t k, size_t other) const {
-  // Three-point derivative on a non-uniform grid (exact for quadratics) when both
-  // neighbours of frame k were seen; else the secant towards `other`, the other
-  // end of the interval being interpolated.
+  // The derivative at frame k of the quadratic through three seen frames: k and
+  // both neighbours (central) when they were seen; next to a gap, k, `other` (the
+  // other end of the interval being interpolated) and the frame beyond it
+  // (one-sided). Both are second-order accurate; the secant, used only when no
+  // third frame was seen, is first-order, and its error next to every gap biased
+  // the occluded-burst fit (λ converged 1.5e-3 off the truth at 1 kHz frames).
   const auto& x = track_[i];
   const size_t n = times_.size();
-  if (k > 0 && k + 1 < n && x.col(k - 1).allFinite() && x.col(k + 1).allFinite()) {
-    const double h0 = times_[k] - times_[k - 1], h1 = times_[k + 1] - times_[k];
-    return (h0 * h0 * (x.col(k + 1) - x.col(k)) + h1 * h1 * (x.col(k) - x.col(k - 1))) /
-           (h0 * h1 * (h0 + h1));
+  auto seen = [&](size_t j) { return x.col(j).allFinite(); };
+  size_t a = 0, b = 0;  // the two other frames of the quadratic
+  if (k > 0 && k + 1 < n && seen(k - 1) && seen(k + 1)) {
+    a = k - 1;
+    b = k + 1;
+  } else if (const size_t beyond = other > k ? other + 1 : other - 1;
+             other > 0 && beyond < n && seen(beyond)) {
+    a = other;
+    b = beyond;
+  } else {
+    return (x.col(other) - x.col(k)) / (times_[other] - times_[k]);
   }
-  return (x.col(other) - x.col(k)) / (times_[other] - times_[k]);
+  const double t = times_[k], ta = times_[a], tb = times_[b];
+  // Lagrange basis derivatives at t.
+  const double dk = 1 / (t - ta) + 1 / (t - tb);
+  const double da = (t - tb) / ((ta - t) * (ta - tb));
+  const double db = (t - ta) / ((tb - t) * (tb - ta));
+  return dk * x.col(k) + da * x.col(a) + db * x.col(b);
 }
 
 bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar) const {
