@@ -2,12 +2,14 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <exception>
 #include <nlopt.hpp>
 
+#include "adjoint/uncertainty.hpp"
 #include "engine/error.hpp"
 
 namespace kelvin {
@@ -73,6 +75,11 @@ struct Context {
   double start_gradient = 0, best_gradient = 0;  // projected gradient norms
   double tolerance_scale = 1;                    // see the restarts in run_fit
   long best_steps = 0;  // most forward steps of one experiment at the best point
+  // After a Gauss–Newton restart (see precondition) the optimiser's x is z with
+  // p = clamp(origin + basis·z); before, x is p itself (basis empty).
+  Eigen::VectorXd origin;
+  Eigen::MatrixXd basis;
+  Eigen::VectorXd best_g;  // the best point's gradient in p
   bool remeasure = false;
   double remeasured = NAN;  // the best's objective at the new tolerances
 };
@@ -94,7 +101,11 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
   // NLopt's L-BFGS notices force_stop only between line-search trials; throwing
   // forced_stop here ends the run before another simulation starts.
   if (c.outcome.interrupted || c.budget_spent) throw nlopt::forced_stop();
-  const Eigen::Map<const Eigen::VectorXd> p(x.data(), static_cast<long>(x.size()));
+  const Eigen::Map<const Eigen::VectorXd> xv(x.data(), static_cast<long>(x.size()));
+  const Eigen::VectorXd p =
+      c.basis.size() == 0
+          ? Eigen::VectorXd(xv)
+          : Eigen::VectorXd((c.origin + c.basis * xv).cwiseMax(c.lo).cwiseMin(c.hi));
   try {
     GradientOptions gopt = c.options.gradient;
     gopt.tolerance_scale *= c.tolerance_scale;
@@ -141,6 +152,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       r.accepted = true;
       if (remeasure) c.remeasured = r.objective;
       if (ev.gradient.size()) {
+        c.best_g = g;
         c.best_gradient = projected_norm(g, p, c.lo, c.hi);
         if (c.outcome.best.evaluation == 0) c.start_gradient = c.best_gradient;
       }
@@ -156,8 +168,12 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     }
     c.outcome.history.push_back(r);
     if (c.options.on_evaluation) c.options.on_evaluation(r);
-    if (c.scale == 0) c.scale = objective_scale(ev.ok, r.objective, g);
-    if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * g;
+    if (c.scale == 0)
+      c.scale = objective_scale(ev.ok, r.objective,
+                                c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g) : g);
+    if (!grad.empty())
+      Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) =
+          c.scale * (c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g) : g);
     if (interrupted) {
       c.outcome.interrupted = true;
       c.opt->force_stop();
@@ -188,6 +204,35 @@ double smoothness_roughness(const std::vector<std::pair<int, int>>& pairs,
     }
   }
   return sum;
+}
+
+/// Gauss–Newton preconditioning for a restart of a stalled L-BFGS: in an
+/// ill-conditioned valley (the occluded-bar fit: λ 1.9× off, its gradient 5× below
+/// μ's, Φ's integration noise 1e-3 of the decrease a step could gain) the
+/// restart's steepest-descent step only moves the stiff direction, and the line
+/// search stalls again at every tolerance. With JᵀJ from the marker sensitivities
+/// at the best point (the standard errors' computation, one sensitivity solve),
+/// the fit continues in z, p = p_best + B z with B Bᵀ ∝ (JᵀJ)⁻¹, where the
+/// Gauss–Newton Hessian is a multiple of the identity. B's scale makes L-BFGS's
+/// first step (length ½ along −∇_z, see objective_scale) the Gauss–Newton step
+/// −(1/κ)(JᵀJ)⁻¹∇Φ, κ = 2Φ / ‖r‖² relating Φ's time integral to the sum over
+/// frames. False when JᵀJ is unavailable (too many parameters, singular).
+bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd& gradient) {
+  const ParameterUncertainty u =
+      gauss_newton_uncertainty(c.problem, best, c.options.gradient.interrupt);
+  const double phi = c.outcome.best.misfit;
+  const int n = static_cast<int>(best.size());
+  if (!u.ok || !(phi > 0) || !(u.sigma > 0) || u.observations <= n) return false;
+  const Eigen::LLT<Eigen::MatrixXd> llt(u.covariance);  // C = σ̂² (JᵀJ)⁻¹ = L Lᵀ
+  if (llt.info() != Eigen::Success) return false;
+  const Eigen::MatrixXd L = llt.matrixL();
+  // Δp_GN = −(1/κ)(JᵀJ)⁻¹ g = −β C g with β = (N − n) / (2Φ); with B = s L the
+  // step −½ B Lᵀg/|Lᵀg| equals it for s = 2β|Lᵀg|.
+  const double beta = (u.observations - n) / (2 * phi);
+  const double s = 2 * beta * (L.transpose() * gradient).norm();
+  if (!(s > 0) || !std::isfinite(s)) return false;
+  c.basis = s * L;
+  return true;
 }
 
 FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOptions& options) {
@@ -253,9 +298,13 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   // down); the solver tolerances are then tightened 10× (at most kTightenings times)
   // and the fit goes on. The occluded-bar fit stalled so at rtol 1e-7, 1.9× off in
   // λ, and reached the truth at rtol 1e-8.
+  //
+  // A stalled L-BFGS first restarts once from each best point in Gauss–Newton-
+  // scaled variables (see precondition); tightening comes after that.
   constexpr int kMaxRestarts = 6, kTightenings = 2;
   constexpr double kRestartGain = 1e-6, kConvergedGradient = 1e-8;
   int tightenings = 0;
+  int preconditioned_at = -1;  // the best evaluation a Gauss–Newton restart began from
   for (int restart = 0;; ++restart) {
     double best_before = c.outcome.best.objective;
     c.remeasured = NAN;
@@ -299,7 +348,17 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
                                               kRestartGain * std::abs(best_before);
     const int left = budget - c.outcome.evaluations;
     if (!gave_up || left <= 0 || restart >= kMaxRestarts || c.outcome.best.evaluation == 0) break;
-    if (!improved) {
+    if (algorithm == nlopt::LD_LBFGS && preconditioned_at != c.outcome.best.evaluation &&
+        c.best_g.size() == n && precondition(c, c.outcome.p, c.best_g)) {
+      preconditioned_at = c.outcome.best.evaluation;
+      const std::vector<double> free(n, HUGE_VAL);
+      opt.set_lower_bounds(std::vector<double>(n, -HUGE_VAL));
+      opt.set_upper_bounds(free);  // the box is kept by clamping p (objective)
+      if (options.on_progress)
+        options.on_progress(
+            "line search stalled: restarting in Gauss–Newton-scaled parameters (JᵀJ from one "
+            "sensitivity solve)");
+    } else if (!improved) {
       if (tightenings == kTightenings || options.gradient.method == GradientMethod::kNone) break;
       ++tightenings;
       c.tolerance_scale *= 0.1;
@@ -310,7 +369,12 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
                         "{:g}× the scenario's",
                         c.tolerance_scale));
     }
-    x.assign(c.outcome.p.data(), c.outcome.p.data() + n);
+    if (c.basis.size()) {
+      c.origin = c.outcome.p;
+      x.assign(n, 0.0);
+    } else {
+      x.assign(c.outcome.p.data(), c.outcome.p.data() + n);
+    }
     opt.set_maxeval(left);
     c.scale = 0;
   }

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <numeric>
 #include <random>
@@ -155,12 +156,13 @@ TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
   EXPECT_EQ(f.outcome.failures, 0);
 }
 
-// With 20 % of the frames hidden in bursts, L-BFGS stalls in the λ–μ–ν valley at
-// the scenario's rtol 1e-7 (λ 1.9× off, the line search unable to see a decrease
-// through Φ's noise); run_fit's restarts tighten the tolerances and go on. The
-// observed tracks next to each gap use secant slopes, which bias them slightly:
-// the fit converges to ν 1.19e-3 off the truth (the same value after 80 and after
-// 120 evaluations), so ν is held to 2e-3 here and λ, μ to 1e-3.
+// With 20 % of the frames hidden in bursts, L-BFGS stalls in the λ–μ–ν valley (λ
+// 1.9× off, RMS 0.011 mm, the line search unable to see a decrease through Φ's
+// integration noise); run_fit restarts it in Gauss–Newton-scaled parameters, whose
+// first step lands next to the truth. The observed tracks next to each gap take
+// one-sided second-order slopes: with secants there the fit converged to λ 1.5e-3
+// and ν 1.2e-3 off the truth; now to λ 3e-4, μ 4e-5, ν 9e-5 (kelvin fit, 101
+// evaluations, at the misfit floor RMS 0.0002 mm of the truth itself).
 TEST(Fit, OccludedBurstsStillRecoverTheParameters) {
   const path dir = test::scratch("fit-occluded");
   const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(kTruth)),
@@ -169,7 +171,7 @@ TEST(Fit, OccludedBurstsStillRecoverTheParameters) {
   const double missing = t.xyz.array().isNaN().cast<double>().sum() / t.xyz.size();
   EXPECT_NEAR(missing, 0.2, 0.02);
   const Fitted f = fit(dir, tracks);
-  expect_recovered(f, 1e-3, 2e-3);
+  expect_recovered(f, 1e-3);
 }
 
 // All four parameters of the issue (λ, μ, ν, h), each 2× off, from two motions of
@@ -195,7 +197,14 @@ fit:
 )");
   ASSERT_EQ(f.problem->num_experiments(), 2);
   expect_recovered(f, 1e-3);
-  EXPECT_EQ(f.outcome.failures, 0);
+  // Line-search trials far out (a flow index of 3, say) may fail, as the issue
+  // allows: the fit backs off. Each must say why and where, and none is a best.
+  for (const FitRecord& r : f.outcome.history)
+    if (!r.ok) {
+      EXPECT_FALSE(r.accepted);
+      EXPECT_NE(r.error.find("t = "), std::string::npos) << r.error;
+      std::printf("failed trial %d: %s\n", r.evaluation, r.error.c_str());
+    }
 }
 
 // The noise test is about the statistics at the optimum, not about getting there
