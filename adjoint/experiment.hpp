@@ -37,14 +37,16 @@ struct GradientOptions {
 };
 
 /// Default checkpoint budget (steps) for a state of `state_size` entries. IDAS
-/// allocates Nd Hermite points (y and y', 16 bytes per entry each) up front, so Nd
-/// trades restarts against memory. On the 720-tet foam cylinder (0.1 s, 583 steps,
-/// bench_gradient, when IDAS still checkpointed within a run) Φ + adjoint over Φ
-/// was 4.8 at Nd = 100, 4.5 at 300 and 3.9 at 1000 (one interval), and 9.0 at 10⁵
-/// (the allocation alone). The budget keeps the points under 16 MiB.
+/// allocates the Hermite points (y and y', 16 bytes per entry each) of a segment up
+/// front, so the budget trades segment restarts (each integrated twice and restarted
+/// at BDF order 1) against memory. 64 MiB of points, at least 200 and at most 1000:
+/// on the 8100-tet foam cylinder (0.05 s, 249 steps) a 16 MiB budget (92 points)
+/// cut the run into 6 segments and Φ + adjoint cost 2.8–4.7× Φ alone (bench_gradient,
+/// busy machine) where one segment costs 2.2–2.3×; the 720-tet cylinder keeps 1000
+/// points (20 MiB), about twice its forward run's memory.
 inline long default_checkpoint_steps(int state_size) {
   const long per_point = 16L * std::max(state_size, 1);
-  return std::clamp((16L << 20) / per_point, 50L, 1000L);
+  return std::clamp((64L << 20) / per_point, 200L, 1000L);
 }
 
 struct ExperimentResult {
