@@ -285,11 +285,21 @@ class BoundaryStates {
 
 void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   const int n = run.n;
-  const bool planning = run.planning();
+  const long budget = run.checkpoint_budget();
+  if (run.planning()) {
+    // The experiment's first evaluation: one plain run (no Hermite points, so no
+    // memory that grows with the duration) counts the steps the plan is made from.
+    ExperimentResult plain;
+    plain.phi_per_marker.setZero(run.objective.num_markers());
+    if (!run.integrate_segments({run.t0, run.t_end}, 1, plain)) {
+      result = plain;
+      return;
+    }
+    run.ex.plan_segments(plain.forward_stats.steps, budget, run.t_end - run.t0);
+  }
   const std::vector<double> T = run.boundaries();
   const int segments = static_cast<int>(T.size()) - 1;
   result.segments = segments;
-  const long budget = run.checkpoint_budget();
 
   // Pass 1 (only with several segments): Φ and the state at every boundary but the
   // last, with the first step each restart takes (pass 2 retraces pass 1's steps).
@@ -336,15 +346,8 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       result.forward_stats.steps += steps;
       if (!ok) return;
       if (steps < points) break;
-      if (planning && run.ex.plan_segments(steps, budget, run.t_end - run.t0)) {
-        integ.reset();  // its Hermite points are the budget's worth of memory
-        result = ExperimentResult{};
-        evaluate_adjoint(run, result);
-        return;
-      }
       points = std::max(points, steps) * 5 / 4 + 8;
     }
-    if (planning) run.ex.plan_segments(integ->stats().steps, budget, run.t_end - run.t0);
     if (k == segments - 1) {
       result.phi_per_marker += integ->quadrature();
       run.set_adjoint_scale(result.phi_per_marker);
