@@ -128,9 +128,12 @@ bool ExperimentRun::integrate_segments(
   for (int k = 0; k < count; ++k) {
     auto integ = start(T[k], xk, vk, first_step);
     const bool ok = advance(*integ, T[k + 1], result);
-    result.phi_per_marker += integ->quadrature();
     result.forward_stats.steps += integ->stats().steps;
+    // After a failure the quadrature cannot be read at the last output time (IDAS
+    // stepped past it): reading it threw, and the trial's error became "could not
+    // interpolate the quadratures" instead of what stopped it.
     if (!ok) return false;
+    result.phi_per_marker += integ->quadrature();
     xk = integ->positions();
     vk = integ->velocities();
     first_step = integ->restart_step();

@@ -123,9 +123,9 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
   });
 
   const bool ok = run.advance(*integ, run.t_end, result);
-  result.phi_per_marker = integ->quadrature();
   result.forward_stats = integ->stats();
-  if (!ok) return;
+  if (!ok) return;  // the quadrature is unreadable after a failure (integrate_segments)
+  result.phi_per_marker = integ->quadrature();
   result.gradient = integ->quadrature_sensitivities().colwise().sum().transpose();
   result.ok = true;
 }

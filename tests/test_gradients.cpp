@@ -261,6 +261,25 @@ TEST(Gradients, StepLimitFailsTheEvaluationAndSaysWhere) {
   }
 }
 
+// A run that the integrator itself stops (here its step limit, solver.max_steps)
+// fails with the integrator's reason, for every method: reading Φ's quadrature
+// after such a stop used to throw and replace it with "could not interpolate".
+TEST(Gradients, IntegratorFailureKeepsItsOwnMessage) {
+  const fs::path dir = scratch("solver-limit");
+  Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  s.solver.max_steps = 300;  // the run takes a few thousand
+  FitProblem problem(s, {param("elastic.mu")});
+  for (GradientMethod method :
+       {GradientMethod::kNone, GradientMethod::kForward, GradientMethod::kAdjoint}) {
+    GradientOptions o;
+    o.method = method;
+    const Evaluation e = problem.evaluate(problem.map().initial(), o);
+    EXPECT_FALSE(e.ok) << to_string(method);
+    EXPECT_NE(e.error.find("solver.max_steps = 300"), std::string::npos)
+        << to_string(method) << ": " << e.error;
+  }
+}
+
 TEST(Gradients, OccludedMarkerDropsExactlyItsIntervals) {
   // With the tip hidden in frames 5..9, the tip contributes nothing on [t₄, t₁₀]
   // (the intervals that touch a hidden frame), and elsewhere nothing changes except
