@@ -287,15 +287,11 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   const int n = run.n;
   const long budget = run.checkpoint_budget();
   if (run.planning()) {
-    // The experiment's first evaluation: one plain run (no Hermite points, so no
-    // memory that grows with the duration) counts the steps the plan is made from.
     ExperimentResult plain;
-    plain.phi_per_marker.setZero(run.objective.num_markers());
-    if (!run.integrate_segments({run.t0, run.t_end}, 1, plain)) {
+    if (!run.plan_segments(plain)) {
       result = plain;
       return;
     }
-    run.ex.plan_segments(plain.forward_stats.steps, budget, run.t_end - run.t0);
   }
   const std::vector<double> T = run.boundaries();
   const int segments = static_cast<int>(T.size()) - 1;

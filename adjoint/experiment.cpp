@@ -255,19 +255,28 @@ void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
   adjoint_velocity_ratio = duration / std::max(node_mass, 1e-300);
 }
 
+bool ExperimentRun::plan_segments(ExperimentResult& plain) {
+  plain.phi_per_marker.setZero(objective.num_markers());
+  if (!integrate_segments({t0, t_end}, 1, plain)) return false;
+  ex.plan_segments(plain.forward_stats.steps, checkpoint_budget(), t_end - t0);
+  plain.ok = true;
+  return true;
+}
+
 void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
+  if (run.planning()) {
+    // A failed planning run, or a plan of one segment: that run is the answer.
+    ExperimentResult plain;
+    if (!run.plan_segments(plain) || run.boundaries().size() == 2) {
+      result = plain;
+      return;
+    }
+  }
   // Segmented like the adjoint, so that Φ belongs to the same trajectory.
-  const bool planning = run.planning();
   const std::vector<double> T = run.boundaries();
   result.segments = static_cast<int>(T.size()) - 1;
   result.phi_per_marker.setZero(run.objective.num_markers());
   if (!run.integrate_segments(T, result.segments, result)) return;
-  if (planning && run.ex.plan_segments(result.forward_stats.steps, run.checkpoint_budget(),
-                                       run.t_end - run.t0)) {
-    result = ExperimentResult{};
-    evaluate_objective(run, result);
-    return;
-  }
   result.ok = true;
 }
 

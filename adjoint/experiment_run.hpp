@@ -37,6 +37,11 @@ struct ExperimentRun {
   long checkpoint_budget() const;
   /// True when this evaluation decides the experiment's automatic segment plan.
   bool planning() const { return !ex.segments_planned(opt.segment); }
+  /// Decides it: one plain run over the whole duration (no Hermite points, so no
+  /// memory that grows with the duration) into `plain` (Φ, steps), whose step
+  /// count Experiment::plan_segments turns into segments. False (with
+  /// plain.error) when that run fails.
+  bool plan_segments(ExperimentResult& plain);
 
   void expand(double t, const double* y, const double* yp);
   /// A fresh integrator at (t, y) with the Φ quadrature attached: every forward

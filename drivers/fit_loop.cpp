@@ -168,12 +168,9 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     }
     c.outcome.history.push_back(r);
     if (c.options.on_evaluation) c.options.on_evaluation(r);
-    if (c.scale == 0)
-      c.scale = objective_scale(ev.ok, r.objective,
-                                c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g) : g);
-    if (!grad.empty())
-      Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) =
-          c.scale * (c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g) : g);
+    const Eigen::VectorXd gx = c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g) : g;
+    if (c.scale == 0) c.scale = objective_scale(ev.ok, r.objective, gx);
+    if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * gx;
     if (interrupted) {
       c.outcome.interrupted = true;
       c.opt->force_stop();
@@ -351,9 +348,9 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     if (algorithm == nlopt::LD_LBFGS && preconditioned_at != c.outcome.best.evaluation &&
         c.best_g.size() == n && precondition(c, c.outcome.p, c.best_g)) {
       preconditioned_at = c.outcome.best.evaluation;
-      const std::vector<double> free(n, HUGE_VAL);
+      // z is unbounded; the box is kept by clamping p (objective).
       opt.set_lower_bounds(std::vector<double>(n, -HUGE_VAL));
-      opt.set_upper_bounds(free);  // the box is kept by clamping p (objective)
+      opt.set_upper_bounds(std::vector<double>(n, HUGE_VAL));
       if (options.on_progress)
         options.on_progress(
             "line search stalled: restarting in Gauss–Newton-scaled parameters (JᵀJ from one "

@@ -201,6 +201,19 @@ def mean_position(tracks, name, frames):
     return mean(points)
 
 
+def print_residuals(names, rest, to_model, scatter=None):
+    """Prints each marker's |model − layout| residual (with its rest scatter when
+    given); returns the RMS residual in mm."""
+    sq = 0.0
+    for m in names:
+        r = sub(to_model(rest[m]), LAYOUT[m])
+        sq += dot(r, r)
+        lead = f"{1e3 * scatter[m]:6.3f} mm     " if scatter else "residual "
+        print(f"  {m:9s}  {lead}{1e3 * norm(r):6.3f} mm "
+              f"({1e3 * r[0]:+.2f}, {1e3 * r[1]:+.2f}, {1e3 * r[2]:+.2f})")
+    return 1e3 * math.sqrt(sq / len(names))
+
+
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -257,13 +270,8 @@ def main():
     to_model = lambda p: add(matvec(R, p), t)  # noqa: E731
     print("rigid fit of the six markers to the layout:")
     print("  marker     rest scatter   residual |model − layout| (mm)")
-    sq = 0.0
-    for m in names:
-        r = sub(to_model(rest[m]), LAYOUT[m])
-        sq += dot(r, r)
-        print(f"  {m:9s}  {1e3 * scatter[m]:6.3f} mm     {1e3 * norm(r):6.3f}  "
-              f"({1e3 * r[0]:+.2f}, {1e3 * r[1]:+.2f}, {1e3 * r[2]:+.2f})")
-    print(f"  RMS residual {1e3 * math.sqrt(sq / len(names)):.3f} mm")
+    rms = print_residuals(names, rest, to_model, scatter)
+    print(f"  RMS residual {rms:.3f} mm")
 
     # Checks of the registration against the data themselves.
     settled_frames = [k for k in range(n) if times[k] >= times[-1] - 1.0]
@@ -294,13 +302,8 @@ def main():
     dm = matvec(R, drop)
     print(f"roll about the beam axis: {math.degrees(psi):+.2f}°; settled drop now "
           f"({1e3 * dm[0]:+.3f}, {1e3 * dm[1]:+.3f}, {1e3 * dm[2]:+.3f}) mm; gravity is model −z")
-    sq = 0.0
-    for m in names:
-        r = sub(to_model(rest[m]), LAYOUT[m])
-        sq += dot(r, r)
-        print(f"  {m:9s}  residual {1e3 * norm(r):6.3f} mm "
-              f"({1e3 * r[0]:+.2f}, {1e3 * r[1]:+.2f}, {1e3 * r[2]:+.2f})")
-    print(f"  RMS residual after the roll {1e3 * math.sqrt(sq / len(names)):.3f} mm")
+    rms = print_residuals(names, rest, to_model)
+    print(f"  RMS residual after the roll {rms:.3f} mm")
     print("final registration (capture -> model): x_model = R x_capture + t, rows of R:")
     for row in R:
         print(f"  [{row[0]:+.6f} {row[1]:+.6f} {row[2]:+.6f}]")
