@@ -106,6 +106,16 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       c.basis.size() == 0
           ? Eigen::VectorXd(xv)
           : Eigen::VectorXd((c.origin + c.basis * xv).cwiseMax(c.lo).cwiseMin(c.hi));
+  // NLopt begins every restart by evaluating its start point, which is the best
+  // point, already simulated at these tolerances: no simulation is spent on it.
+  if (!c.remeasure && c.outcome.best.evaluation != 0 && p == c.outcome.p &&
+      (grad.empty() || c.best_g.size() == p.size())) {
+    const Eigen::VectorXd gx =
+        c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * c.best_g) : c.best_g;
+    if (c.scale == 0) c.scale = objective_scale(true, c.outcome.best.objective, gx);
+    if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * gx;
+    return c.scale * c.outcome.best.objective;
+  }
   try {
     GradientOptions gopt = c.options.gradient;
     gopt.tolerance_scale *= c.tolerance_scale;
