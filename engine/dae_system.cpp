@@ -13,7 +13,7 @@ bool DaeSystem::residual(double t, const double* y, const double* yp, double* r)
   for (int i = 0; i < n_; ++i) r[i] = yp[i] - y[n_ + i];
   double* rv = r + n_;
   for (int i = 0; i < n_; ++i)
-    rv[i] = out_.force[i] + clamp_inertia_[i] - model_.gravity_force()[i];
+    rv[i] = out_.force[i] + clamp_inertia_[i] - model_.external_force()[i];
   model_.mass_multiply(yp + n_, rv);
   return true;
 }
@@ -56,7 +56,7 @@ bool DaeSystem::consistent_derivative(double t, const double* y, double* yp) {
   model_.expand(t, y, y + n_, x_, v_);
   if (!model_.assemble(x_, v_, {}, out_)) return false;
   model_.clamp_inertia(t, clamp_inertia_);
-  const Eigen::VectorXd rhs = model_.gravity_force() - out_.force - clamp_inertia_;
+  const Eigen::VectorXd rhs = model_.external_force() - out_.force - clamp_inertia_;
   for (int i = 0; i < n_; ++i) yp[i] = y[n_ + i];
   mass_solve(rhs.data(), yp + n_);
   return true;

@@ -22,13 +22,15 @@ Eigen::SparseMatrix<double> to_sparse_matrix(const SparsePattern& pattern,
 }
 
 FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
-                   Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass)
+                   Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass,
+                   std::vector<NodeLoad> loads)
     : mesh_(mesh),
       terms_(std::move(terms)),
       density_(std::move(density)),
       gravity_(gravity),
       clamps_(std::move(clamps)),
-      lumped_(lumped_mass) {
+      lumped_(lumped_mass),
+      loads_(std::move(loads)) {
   const int nn = mesh.num_nodes(), ne = mesh.num_tets();
   if (density_.size() != ne) throw Error("density field size does not match the mesh");
   for (const auto& term : terms_)
@@ -55,6 +57,23 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
   for (int a = 0; a < nn; ++a)
     if (clamp_of_node_[a] < 0)
       for (int i = 0; i < 3; ++i) dof_[3 * a + i] = n_++;
+  attached_mass_.setZero(nn);
+  load_force_.setZero(3, nn);
+  for (const auto& load : loads_) {
+    std::vector<int> free;
+    for (int node : load.nodes) {
+      if (node < 0 || node >= nn)
+        throw Error(fmt::format("load '{}' names node {}, outside the mesh", load.name, node));
+      if (clamp_of_node_[node] < 0) free.push_back(node);
+    }
+    if (free.empty())
+      throw Error(
+          fmt::format("load '{}' has no free node: a clamp holds all of its nodes", load.name));
+    for (int node : free) {
+      attached_mass_[node] += load.mass / static_cast<double>(free.size());
+      load_force_.col(node) += load.force / static_cast<double>(free.size());
+    }
+  }
   build_pattern();
   build_mass();
   update_rest_tangents();
@@ -155,10 +174,20 @@ void FemModel::build_mass() {
       if (sc[k] >= 0 && Me(k % 12, k / 12) != 0) mass_[sc[k]] += Me(k % 12, k / 12);
   }
   if (lumped_) clamp_coupled_elements_.clear();
-  f_gravity_.setZero(n_);
+  // Attached masses are point masses: diagonal entries, lumped or consistent.
+  node_mass_ += attached_mass_;
+  for (int a = 0; a < nn; ++a)
+    for (int i = 0; i < 3; ++i) {
+      const int d = dof(a, i);
+      if (d < 0 || attached_mass_[a] == 0) continue;
+      const auto begin = pattern_.rowind.begin() + pattern_.colptr[d];
+      const auto end = pattern_.rowind.begin() + pattern_.colptr[d + 1];
+      mass_[std::lower_bound(begin, end, d) - pattern_.rowind.begin()] += attached_mass_[a];
+    }
+  f_external_.setZero(n_);
   for (int a = 0; a < nn; ++a)
     for (int i = 0; i < 3; ++i)
-      if (dof(a, i) >= 0) f_gravity_[dof(a, i)] = node_mass_[a] * gravity_[i];
+      if (dof(a, i) >= 0) f_external_[dof(a, i)] = node_mass_[a] * gravity_[i] + load_force_(i, a);
 }
 
 void FemModel::set_density(Eigen::VectorXd density) {
@@ -436,11 +465,12 @@ double FemModel::kinetic_energy(const Eigen::Matrix3Xd& v) const {
       for (int b = 0; b < 4; ++b)
         ke += 0.5 * m * (a == b ? 2 : 1) * v.col(el.nodes[a]).dot(v.col(el.nodes[b]));
   }
-  return ke;
+  return ke + 0.5 * (v.colwise().squaredNorm().transpose().array() * attached_mass_.array()).sum();
 }
 
-double FemModel::gravity_potential(const Eigen::Matrix3Xd& x) const {
-  return -(node_mass_.transpose() * (gravity_.transpose() * x).transpose())(0);
+double FemModel::external_potential(const Eigen::Matrix3Xd& x) const {
+  return -(node_mass_.transpose() * (gravity_.transpose() * x).transpose())(0) -
+         (load_force_.array() * x.array()).sum();
 }
 
 }  // namespace kelvin

@@ -35,6 +35,16 @@ struct ClampBinding {
   std::shared_ptr<const RigidMotion> motion;
 };
 
+/// A constant load carried by a set of nodes in equal shares: a force (N, total)
+/// and an attached mass (kg, total) that adds inertia and, through gravity,
+/// weight; a hanging weight is a mass. Clamped nodes carry no share.
+struct NodeLoad {
+  std::string name;
+  std::vector<int> nodes;
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();
+  double mass = 0;
+};
+
 /// Symmetric CSC pattern over the free dofs, including the diagonal.
 struct SparsePattern {
   int n = 0;
@@ -84,7 +94,8 @@ struct ElementTangents {
 class FemModel {
  public:
   FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
-           Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass);
+           Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass,
+           std::vector<NodeLoad> loads = {});
 
   const Mesh& mesh() const { return mesh_; }
   int num_dofs() const { return n_; }
@@ -97,8 +108,9 @@ class FemModel {
   bool lumped_mass() const { return lumped_; }
   /// Mass matrix values in pattern() order (diagonal only for lumped mass).
   const std::vector<double>& mass() const { return mass_; }
-  /// Gravity force on the free dofs (row sums of the full mass matrix times g).
-  const Eigen::VectorXd& gravity_force() const { return f_gravity_; }
+  /// External force on the free dofs: gravity (row sums of the full mass matrix,
+  /// attached masses included, times g) plus the loads' forces.
+  const Eigen::VectorXd& external_force() const { return f_external_; }
   const Eigen::Vector3d& gravity() const { return gravity_; }
   const Eigen::VectorXd& density() const { return density_; }
   /// Replaces the density field (per tet) and rebuilds mass and gravity.
@@ -151,8 +163,8 @@ class FemModel {
 
   /// Kinetic energy ½ vᵀ M v over all nodes (clamped included) for full velocities.
   double kinetic_energy(const Eigen::Matrix3Xd& v) const;
-  /// Gravitational potential −Σ m_a g·x_a for full positions.
-  double gravity_potential(const Eigen::Matrix3Xd& x) const;
+  /// Potential of the external forces, −Σ (m_a g + f_a)·x_a, for full positions.
+  double external_potential(const Eigen::Matrix3Xd& x) const;
 
  private:
   /// P, the requested tangents (kTangent, kRateTangent) and energy of element e,
@@ -168,6 +180,9 @@ class FemModel {
   Eigen::Vector3d gravity_;
   std::vector<ClampBinding> clamps_;
   bool lumped_;
+  std::vector<NodeLoad> loads_;
+  Eigen::VectorXd attached_mass_;  // per node, from the loads
+  Eigen::Matrix3Xd load_force_;    // per node, from the loads
   std::vector<TetElement> elements_;
   std::vector<int> dof_;            // 3 × nodes → free dof or −1
   std::vector<int> clamp_of_node_;  // clamp index or −1
@@ -175,8 +190,8 @@ class FemModel {
   SparsePattern pattern_;
   std::vector<int> scatter_;   // per element 12×12 → pattern value index or −1
   std::vector<double> mass_;   // pattern values
-  Eigen::VectorXd node_mass_;  // lumped nodal masses (all nodes)
-  Eigen::VectorXd f_gravity_;
+  Eigen::VectorXd node_mass_;  // lumped nodal masses (all nodes, attached masses included)
+  Eigen::VectorXd f_external_;
   std::vector<int> clamp_coupled_elements_;  // elements with free and clamped nodes
   std::vector<Mat9> rest_tangent_;           // per element, only when some term needs it
 };

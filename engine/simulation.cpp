@@ -62,8 +62,10 @@ std::unique_ptr<FemModel> build_model(const Scenario& s) {
   }
   std::vector<ClampBinding> clamps;
   for (const auto& c : s.clamps) clamps.push_back({c.name, c.nodes, c.motion});
+  std::vector<NodeLoad> loads;
+  for (const auto& l : s.loads) loads.push_back({l.name, l.nodes, l.force, l.mass});
   return std::make_unique<FemModel>(s.mesh, std::move(terms), std::move(density), s.gravity,
-                                    std::move(clamps), s.solver.lumped_mass);
+                                    std::move(clamps), s.solver.lumped_mass, std::move(loads));
 }
 
 IntegratorOptions integrator_options(const SolverSpec& solver) {

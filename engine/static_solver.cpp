@@ -24,8 +24,8 @@ struct Residual {
     req.stiffness = tangent;
     req.energy = energy != nullptr;
     if (!model.assemble(x, v, req, out)) return false;
-    g = out.force - s * model.gravity_force();
-    if (energy) *energy = out.energy - s * model.gravity_force().dot(xf);
+    g = out.force - s * model.external_force();
+    if (energy) *energy = out.energy - s * model.external_force().dot(xf);
     return true;
   }
 };
@@ -52,7 +52,7 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
     return res;
   }
   // Forces are compared to the load, or to the initial imbalance when there is no load.
-  const double scale = std::max({model.gravity_force().norm(), g.norm(), 1e-300});
+  const double scale = std::max({model.external_force().norm(), g.norm(), 1e-300});
   // Newton corrections below this length (1e-12 of the body's size) are round-off.
   const Eigen::Matrix3Xd& X = model.mesh().nodes;
   const double negligible = 1e-12 * (X.rowwise().maxCoeff() - X.rowwise().minCoeff()).norm();

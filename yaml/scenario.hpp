@@ -49,6 +49,16 @@ struct ClampSpec {
   std::shared_ptr<RigidMotion> motion;  // FixedMotion when none is given
 };
 
+/// `loads:` entry: a constant force and/or an attached mass carried by the
+/// selected free nodes in equal shares (engine/fem_model.hpp, NodeLoad).
+struct LoadSpec {
+  std::string name;
+  NodeSelection selection;
+  std::vector<int> nodes;                           // resolved; at least one is free of the clamps
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();  // N, total
+  double mass = 0;                                  // kg, total
+};
+
 struct MarkersSpec {
   std::vector<MarkerEmbedding> embedded;  // empty when the scenario has no markers
   std::string observed_path;              // optional captured tracks ("" if none)
@@ -130,6 +140,7 @@ struct Scenario {
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
   bool static_initial = false;  // initial: static (equilibrium at t=0) or rest
   std::vector<ClampSpec> clamps;
+  std::vector<LoadSpec> loads;
   MarkersSpec markers;
   TimeSpec time;
   SolverSpec solver;

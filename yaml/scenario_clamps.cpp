@@ -1,5 +1,5 @@
-// The `clamps:` and `markers:` sections: both resolve against the mesh, so their
-// messages describe the mesh when a selection or a marker misses it.
+// The `clamps:`, `loads:` and `markers:` sections: all resolve against the mesh, so
+// their messages describe the mesh when a selection or a marker misses it.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -206,6 +206,41 @@ std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh
     clamps.push_back(std::move(spec));
   }
   return clamps;
+}
+
+std::vector<LoadSpec> load_loads(const Doc& d, const Node& n, const Mesh& mesh,
+                                 const std::vector<ClampSpec>& clamps) {
+  d.require_sequence(n, "loads");
+  std::set<int> clamped;
+  for (const auto& c : clamps) clamped.insert(c.nodes.begin(), c.nodes.end());
+  std::vector<LoadSpec> loads;
+  for (size_t k = 0; k < n.size(); ++k) {
+    const Node l = n[k];
+    const std::string P = index("loads", k);
+    d.check_keys(l, P, {"name", "select", "force", "mass"});
+    LoadSpec spec;
+    spec.name = l["name"] ? d.string(l["name"], join(P, "name")) : fmt::format("load{}", k);
+    for (const auto& other : loads)
+      if (other.name == spec.name)
+        d.fail(l["name"], join(P, "name"),
+               fmt::format("'{}' is already the name of another load", spec.name));
+    if (!l["force"] && !l["mass"])
+      d.fail(l, P, "give a force (N, total), a mass (kg, total) or both");
+    if (const Node f = l["force"]) spec.force = d.vec3(f, join(P, "force"));
+    if (const Node m = l["mass"]) spec.mass = d.non_negative(m, join(P, "mass"), "kg");
+    const Node sel = d.required(l, P, "select");
+    spec.selection = load_selection(d, sel, join(P, "select"), mesh);
+    spec.nodes = select_nodes(mesh, spec.selection);
+    if (spec.nodes.empty()) d.fail(sel, join(P, "select"), explain_empty(spec.selection, mesh));
+    const bool any_free = std::any_of(spec.nodes.begin(), spec.nodes.end(),
+                                      [&](int i) { return clamped.count(i) == 0; });
+    if (!any_free)
+      d.fail(sel, join(P, "select"),
+             fmt::format("selects {} node(s), all held by clamps: a clamped node carries no load",
+                         spec.nodes.size()));
+    loads.push_back(std::move(spec));
+  }
+  return loads;
 }
 
 MarkersSpec load_markers(const Doc& d, const Node& n, const Mesh& mesh) {

@@ -73,8 +73,8 @@ Scenario load_scenario(const std::string& path) {
   const Doc d(path);
   const Node& root = d.root();
   d.check_keys(root, "",
-               {"name", "mesh", "material", "gravity", "initial", "clamps", "markers", "time",
-                "solver", "fit", "diagnose"});
+               {"name", "mesh", "material", "gravity", "initial", "clamps", "loads", "markers",
+                "time", "solver", "fit", "diagnose"});
   Scenario s;
   s.path = path;
   s.name =
@@ -91,6 +91,8 @@ Scenario load_scenario(const std::string& path) {
   s.mesh = scenario_detail::load_mesh(d, d.required(root, "", "mesh"));
   if (root["clamps"] && !root["clamps"].IsNull())
     s.clamps = scenario_detail::load_clamps(d, root["clamps"], s.mesh, s.time);
+  if (root["loads"] && !root["loads"].IsNull())
+    s.loads = scenario_detail::load_loads(d, root["loads"], s.mesh, s.clamps);
   if (s.static_initial && s.clamps.empty())
     d.fail(root["initial"], "initial",
            "static needs at least one clamp: an unclamped body under load has no equilibrium");

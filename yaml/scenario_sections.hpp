@@ -14,6 +14,9 @@ MaterialSpec load_material(const yamlutil::Doc& d, const YAML::Node& node);
 Mesh load_mesh(const yamlutil::Doc& d, const YAML::Node& node);
 std::vector<ClampSpec> load_clamps(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh,
                                    const TimeSpec& time);
+/// The `loads:` section; needs the clamps, whose nodes carry no load.
+std::vector<LoadSpec> load_loads(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh,
+                                 const std::vector<ClampSpec>& clamps);
 MarkersSpec load_markers(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh);
 /// The `fit:` section, checked against the rest of the scenario (material, markers, time).
 FitSpec load_fit(const yamlutil::Doc& d, const YAML::Node& node, const Scenario& s);
