@@ -48,6 +48,25 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
     experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
   }
   map_ = std::make_unique<ParameterMap>(specs, scenario, experiments_[0]->model());
+  // Joint experiments share the fitted parameters, so each must have the same
+  // material models; otherwise a slot would name another model's parameter (found
+  // here, not as a failed simulation at the first evaluation).
+  const auto& terms = experiments_[0]->model().terms();
+  for (size_t e = 1; e < experiments_.size(); ++e) {
+    const auto& other = experiments_[e]->model().terms();
+    for (const ParamSlot& slot : map_->slots()) {
+      if (slot.is_density()) continue;
+      const std::string mine = terms[slot.term].model->name();
+      const std::string theirs =
+          slot.term < static_cast<int>(other.size()) ? other[slot.term].model->name() : "none";
+      if (mine != theirs)
+        throw Error(fmt::format(
+            "{}: fit.experiments: {}'s {} material model is '{}', {}'s is '{}'; experiments "
+            "fitted jointly share the fitted parameters, so they need the same material models",
+            scenario.path, experiments_[e]->scenario().path, slot.term == 0 ? "elastic" : "viscous",
+            theirs, scenario.path, mine));
+    }
+  }
 }
 
 Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions& options) {

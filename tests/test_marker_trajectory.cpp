@@ -13,6 +13,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/marker_trajectory.hpp"
 #include "adjoint/uncertainty.hpp"
+#include "engine/error.hpp"
 #include "engine/simulation.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
@@ -211,6 +212,26 @@ TEST_F(MarkerTrajectoryTest, ScalingInvarianceIsReportedAsUnidentifiable) {
        {"+1·ln elastic.lambda", "+1·ln elastic.mu", "+1·ln viscous.nu", "+1·ln density"})
     EXPECT_NE(u.error.find(term), std::string::npos) << term << " in: " << u.error;
   std::printf("%s\n", u.error.c_str());
+}
+
+TEST_F(MarkerTrajectoryTest, JointExperimentWithAnotherMaterialModelIsRefusedUpFront) {
+  Scenario s = scenario(kTruth, "joint-main");
+  const Scenario other = scenario(R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 20 })",
+                                  "joint-newtonian");
+  s.fit.experiments = {other.path};
+  try {
+    FitProblem problem(s, params({"elastic.mu", "viscous.h"}));
+    ADD_FAILURE() << "a power-law fit with a Newtonian experiment was accepted";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("joint-newtonian.yaml's viscous material model is 'newtonian'"),
+              std::string::npos)
+        << m;
+    EXPECT_NE(m.find("'power-law'"), std::string::npos) << m;
+  }
 }
 
 TEST_F(MarkerTrajectoryTest, FailuresAreReportedNotThrown) {
