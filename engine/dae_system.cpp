@@ -70,9 +70,7 @@ void DaeSystem::mass_solve(const double* rhs, double* out) {
   if (model_.lumped_mass()) {
     if (mass_diagonal_.empty()) {
       mass_diagonal_.resize(n_);
-      for (int j = 0; j < n_; ++j)
-        for (int p = P.colptr[j]; p < P.colptr[j + 1]; ++p)
-          if (P.rowind[p] == j) mass_diagonal_[j] = model_.mass()[p];
+      for (int j = 0; j < n_; ++j) mass_diagonal_[j] = model_.mass()[P.find(j, j)];
     }
     for (int j = 0; j < n_; ++j) x[j] = b[j] / mass_diagonal_[j];
     return;

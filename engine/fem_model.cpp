@@ -23,14 +23,13 @@ Eigen::SparseMatrix<double> to_sparse_matrix(const SparsePattern& pattern,
 
 FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
                    Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass,
-                   std::vector<NodeLoad> loads)
+                   const std::vector<NodeLoad>& loads)
     : mesh_(mesh),
       terms_(std::move(terms)),
       density_(std::move(density)),
       gravity_(gravity),
       clamps_(std::move(clamps)),
-      lumped_(lumped_mass),
-      loads_(std::move(loads)) {
+      lumped_(lumped_mass) {
   const int nn = mesh.num_nodes(), ne = mesh.num_tets();
   if (density_.size() != ne) throw Error("density field size does not match the mesh");
   for (const auto& term : terms_)
@@ -59,7 +58,7 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
       for (int i = 0; i < 3; ++i) dof_[3 * a + i] = n_++;
   attached_mass_.setZero(nn);
   load_force_.setZero(3, nn);
-  for (const auto& load : loads_) {
+  for (const auto& load : loads) {
     std::vector<int> free;
     for (int node : load.nodes) {
       if (node < 0 || node >= nn)
@@ -141,13 +140,9 @@ void FemModel::build_pattern() {
     for (int b = 0; b < 12; ++b) {
       const int c = dof(elements_[e].nodes[b / 3], b % 3);
       if (c < 0) continue;
-      const auto begin = pattern_.rowind.begin() + pattern_.colptr[c];
-      const auto end = pattern_.rowind.begin() + pattern_.colptr[c + 1];
       for (int a = 0; a < 12; ++a) {
         const int r = dof(elements_[e].nodes[a / 3], a % 3);
-        if (r < 0) continue;
-        scatter_[static_cast<size_t>(e) * 144 + 12 * b + a] =
-            static_cast<int>(std::lower_bound(begin, end, r) - pattern_.rowind.begin());
+        if (r >= 0) scatter_[static_cast<size_t>(e) * 144 + 12 * b + a] = pattern_.find(r, c);
       }
     }
 }
@@ -179,10 +174,7 @@ void FemModel::build_mass() {
   for (int a = 0; a < nn; ++a)
     for (int i = 0; i < 3; ++i) {
       const int d = dof(a, i);
-      if (d < 0 || attached_mass_[a] == 0) continue;
-      const auto begin = pattern_.rowind.begin() + pattern_.colptr[d];
-      const auto end = pattern_.rowind.begin() + pattern_.colptr[d + 1];
-      mass_[std::lower_bound(begin, end, d) - pattern_.rowind.begin()] += attached_mass_[a];
+      if (d >= 0) mass_[pattern_.find(d, d)] += attached_mass_[a];
     }
   f_external_.setZero(n_);
   for (int a = 0; a < nn; ++a)

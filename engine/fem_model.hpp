@@ -10,6 +10,7 @@
 /// K = ∂r/∂x, D = ∂r/∂v are the stiffness and damping matrices.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -50,6 +51,12 @@ struct SparsePattern {
   int n = 0;
   std::vector<int> colptr, rowind;
   int nnz() const { return static_cast<int>(rowind.size()); }
+  /// Value index of entry (row, col), which must be in the pattern (rows are
+  /// sorted within each column).
+  int find(int row, int col) const {
+    const auto begin = rowind.begin() + colptr[col], end = rowind.begin() + colptr[col + 1];
+    return static_cast<int>(std::lower_bound(begin, end, row) - rowind.begin());
+  }
 };
 
 /// Values laid out in `pattern` as an Eigen sparse matrix (for direct solvers).
@@ -95,7 +102,7 @@ class FemModel {
  public:
   FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
            Eigen::Vector3d gravity, std::vector<ClampBinding> clamps, bool lumped_mass,
-           std::vector<NodeLoad> loads = {});
+           const std::vector<NodeLoad>& loads = {});
 
   const Mesh& mesh() const { return mesh_; }
   int num_dofs() const { return n_; }
@@ -180,7 +187,6 @@ class FemModel {
   Eigen::Vector3d gravity_;
   std::vector<ClampBinding> clamps_;
   bool lumped_;
-  std::vector<NodeLoad> loads_;
   Eigen::VectorXd attached_mass_;  // per node, from the loads
   Eigen::Matrix3Xd load_force_;    // per node, from the loads
   std::vector<TetElement> elements_;

@@ -40,6 +40,42 @@ double ringing_period(const std::vector<double>& t, const std::vector<double>& z
   return (minima.back() - minima.front()) / (count - 1);
 }
 
+/// Mean z of the tip markers per observed frame (all seen) and, for parameters p of
+/// the problem's first experiment, the simulated mean z and marker RMS over the same
+/// frames.
+struct TipRun {
+  std::vector<double> times, z_observed, z_simulated;
+  double rms = 0;
+};
+
+TipRun run_tip(FitProblem& problem, const Eigen::VectorXd& p) {
+  const MarkerTracks& observed = problem.experiment(0).scenario().markers.observed;
+  const int markers = static_cast<int>(observed.names.size());
+  TipRun r;
+  r.times = observed.times;
+  const MarkerTrajectory sim =
+      simulate_markers(problem.experiment(0), problem.map(), p, r.times, false);
+  EXPECT_TRUE(sim.ok) << sim.error;
+  if (!sim.ok) return r;
+  double sum = 0;
+  for (size_t f = 0; f < r.times.size(); ++f) {
+    const Eigen::Map<const Eigen::Matrix3Xd> x(observed.xyz.col(static_cast<long>(f)).data(), 3,
+                                               markers);
+    EXPECT_TRUE(x.allFinite()) << "frame " << f << " has an occluded tip marker";
+    r.z_observed.push_back(x.row(2).mean());
+    r.z_simulated.push_back(sim.positions[f].row(2).mean());
+    sum += (sim.positions[f] - x).squaredNorm();
+  }
+  r.rms = std::sqrt(sum / (markers * static_cast<double>(r.times.size())));
+  return r;
+}
+
+/// run_tip for the scenario's own material.
+TipRun run_tip(const Scenario& scenario) {
+  FitProblem problem(scenario, {positive_fit_parameter("elastic.mu")});
+  return run_tip(problem, problem.map().initial());
+}
+
 TEST(RealBeam, GravityReleaseFitFindsTheBendingStiffnessOfTheSilicone) {
   const Scenario scenario = load_scenario(kExample);
   ASSERT_TRUE(scenario.fit.present);
@@ -108,58 +144,15 @@ TEST(RealBeam, GravityReleaseFitFindsTheBendingStiffnessOfTheSilicone) {
   // The ringing: the fitted model's period matches the capture's within 2 %
   // (capture 129.2 ms, model 130.7 ms): the fitted stiffness is dynamic as well as
   // static, against the same mass.
-  const MarkerTracks& observed = scenario.markers.observed;
-  const int markers = static_cast<int>(observed.names.size());
-  std::vector<double> times, z_observed;
-  for (size_t f = 0; f < observed.times.size(); ++f) {
-    double z = 0;
-    for (int m = 0; m < markers; ++m) z += observed.xyz(3 * m + 2, static_cast<long>(f));
-    ASSERT_TRUE(std::isfinite(z)) << "frame " << f << " has an occluded tip marker";
-    times.push_back(observed.times[f]);
-    z_observed.push_back(z / markers);
-  }
-  const MarkerTrajectory simulated =
-      simulate_markers(problem.experiment(0), map, fit.p, times, false);
-  ASSERT_TRUE(simulated.ok) << simulated.error;
-  std::vector<double> z_simulated;
-  for (const auto& x : simulated.positions) z_simulated.push_back(x.row(2).mean());
-  const double period_observed = ringing_period(times, z_observed, 8);
-  const double period_simulated = ringing_period(times, z_simulated, 8);
+  const TipRun tip = run_tip(problem, fit.p);
+  ASSERT_EQ(tip.z_simulated.size(), tip.times.size());
+  const double period_observed = ringing_period(tip.times, tip.z_observed, 8);
+  const double period_simulated = ringing_period(tip.times, tip.z_simulated, 8);
   ASSERT_TRUE(std::isfinite(period_observed) && std::isfinite(period_simulated));
   std::printf("ringing period: capture %.2f ms, fitted model %.2f ms\n", period_observed * 1e3,
               period_simulated * 1e3);
   EXPECT_NEAR(period_observed, 0.129, 0.002);  // the capture itself: 7.7 Hz, not 10–12
   EXPECT_NEAR(period_simulated / period_observed, 1.0, 0.02);
-}
-
-/// Mean z of the tip markers per observed frame (all seen) and, for the scenario's
-/// own material, the simulated mean z and marker RMS over the same frames.
-struct TipRun {
-  std::vector<double> times, z_observed, z_simulated;
-  double rms = 0;
-};
-
-TipRun run_tip(const Scenario& scenario) {
-  FitProblem problem(scenario, {positive_fit_parameter("elastic.mu")});
-  const MarkerTracks& observed = scenario.markers.observed;
-  const int markers = static_cast<int>(observed.names.size());
-  TipRun r;
-  r.times = observed.times;
-  const MarkerTrajectory sim = simulate_markers(problem.experiment(0), problem.map(),
-                                                problem.map().initial(), r.times, false);
-  EXPECT_TRUE(sim.ok) << sim.error;
-  if (!sim.ok) return r;
-  double sum = 0;
-  for (size_t f = 0; f < r.times.size(); ++f) {
-    const Eigen::Map<const Eigen::Matrix3Xd> x(observed.xyz.col(static_cast<long>(f)).data(), 3,
-                                               markers);
-    EXPECT_TRUE(x.allFinite()) << "frame " << f << " has an occluded tip marker";
-    r.z_observed.push_back(x.row(2).mean());
-    r.z_simulated.push_back(sim.positions[f].row(2).mean());
-    sum += (sim.positions[f] - x).squaredNorm();
-  }
-  r.rms = std::sqrt(sum / (markers * static_cast<double>(r.times.size())));
-  return r;
 }
 
 TEST(RealBeam, HangingWeightIsAMassNotJustAForce) {

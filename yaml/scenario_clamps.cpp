@@ -161,6 +161,29 @@ std::shared_ptr<RigidMotion> load_motion_file(const Doc& d, const Node& f, const
   return motion;
 }
 
+/// A `clamps:` or `loads:` entry's name (`<kind><k>` when absent), refused when an
+/// earlier entry of the same list has it.
+template <class Spec>
+std::string unique_name(const Doc& d, const Node& entry, const std::string& P,
+                        const std::string& kind, size_t k, const std::vector<Spec>& earlier) {
+  const std::string name =
+      entry["name"] ? d.string(entry["name"], join(P, "name")) : fmt::format("{}{}", kind, k);
+  for (const auto& other : earlier)
+    if (other.name == name)
+      d.fail(entry["name"], join(P, "name"),
+             fmt::format("'{}' is already the name of another {}", name, kind));
+  return name;
+}
+
+/// An entry's `select`, parsed and resolved to at least one node of the mesh.
+void select_entry_nodes(const Doc& d, const Node& entry, const std::string& P, const Mesh& mesh,
+                        NodeSelection& selection, std::vector<int>& nodes) {
+  const Node sel = d.required(entry, P, "select");
+  selection = load_selection(d, sel, join(P, "select"), mesh);
+  nodes = select_nodes(mesh, selection);
+  if (nodes.empty()) d.fail(sel, join(P, "select"), explain_empty(selection, mesh));
+}
+
 }  // namespace
 
 std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh,
@@ -173,15 +196,8 @@ std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh
     const std::string P = index("clamps", k);
     d.check_keys(c, P, {"name", "select", "motion"});
     ClampSpec spec;
-    spec.name = c["name"] ? d.string(c["name"], join(P, "name")) : fmt::format("clamp{}", k);
-    for (const auto& other : clamps)
-      if (other.name == spec.name)
-        d.fail(c["name"], join(P, "name"),
-               fmt::format("'{}' is already the name of another clamp", spec.name));
-    const Node sel = d.required(c, P, "select");
-    spec.selection = load_selection(d, sel, join(P, "select"), mesh);
-    spec.nodes = select_nodes(mesh, spec.selection);
-    if (spec.nodes.empty()) d.fail(sel, join(P, "select"), explain_empty(spec.selection, mesh));
+    spec.name = unique_name(d, c, P, "clamp", k, clamps);
+    select_entry_nodes(d, c, P, mesh, spec.selection, spec.nodes);
     int shared = 0;
     std::string other;
     for (int i : spec.nodes) {
@@ -189,7 +205,7 @@ std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh
       if (!fresh) ++shared, other = it->second;
     }
     if (shared > 0)
-      d.fail(sel, join(P, "select"),
+      d.fail(c["select"], join(P, "select"),
              fmt::format("shares {} node(s) with clamp '{}'; a node can follow only one motion",
                          shared, other));
 
@@ -219,23 +235,16 @@ std::vector<LoadSpec> load_loads(const Doc& d, const Node& n, const Mesh& mesh,
     const std::string P = index("loads", k);
     d.check_keys(l, P, {"name", "select", "force", "mass"});
     LoadSpec spec;
-    spec.name = l["name"] ? d.string(l["name"], join(P, "name")) : fmt::format("load{}", k);
-    for (const auto& other : loads)
-      if (other.name == spec.name)
-        d.fail(l["name"], join(P, "name"),
-               fmt::format("'{}' is already the name of another load", spec.name));
+    spec.name = unique_name(d, l, P, "load", k, loads);
     if (!l["force"] && !l["mass"])
       d.fail(l, P, "give a force (N, total), a mass (kg, total) or both");
     if (const Node f = l["force"]) spec.force = d.vec3(f, join(P, "force"));
     if (const Node m = l["mass"]) spec.mass = d.non_negative(m, join(P, "mass"), "kg");
-    const Node sel = d.required(l, P, "select");
-    spec.selection = load_selection(d, sel, join(P, "select"), mesh);
-    spec.nodes = select_nodes(mesh, spec.selection);
-    if (spec.nodes.empty()) d.fail(sel, join(P, "select"), explain_empty(spec.selection, mesh));
+    select_entry_nodes(d, l, P, mesh, spec.selection, spec.nodes);
     const bool any_free = std::any_of(spec.nodes.begin(), spec.nodes.end(),
                                       [&](int i) { return clamped.count(i) == 0; });
     if (!any_free)
-      d.fail(sel, join(P, "select"),
+      d.fail(l["select"], join(P, "select"),
              fmt::format("selects {} node(s), all held by clamps: a clamped node carries no load",
                          spec.nodes.size()));
     loads.push_back(std::move(spec));
