@@ -329,7 +329,9 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
     // the stepping: 2047 instead of 2176 steps on test_gradients' bar), so the room
     // grows by a quarter over its count.
     long points = budget;
-    if (k + 1 < segments)
+    if (segments == 1 && run.ex.planned_steps() > 0)
+      points = std::min(budget, run.ex.planned_steps() * 5 / 4 + 8);
+    else if (k + 1 < segments)
       points = segment_steps[k] + 8;
     else if (!segment_steps.empty())
       points = *std::max_element(segment_steps.begin(), segment_steps.end()) * 5 / 4 + 8;

@@ -97,6 +97,7 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
 }
 
 bool Experiment::plan_segments(long steps, long budget, double duration) {
+  planned_steps_ = steps;
   if (steps < budget) {
     segment_ = 0;
     return false;
