@@ -27,6 +27,7 @@
 #include "adjoint/experiment_run.hpp"
 #include "engine/error.hpp"
 #include "engine/schur_solver.hpp"
+#include "engine/state_vector.hpp"
 
 namespace kelvin {
 namespace {
@@ -169,8 +170,8 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
   auto ctx = static_cast<SUNContext>(forward.sundials_context());
   Backward b(run);
   const long nq = static_cast<long>(dphi_dq.size());
-  N_Vector l = N_VNew_Serial(2 * n, ctx), lp = N_VNew_Serial(2 * n, ctx),
-           q = N_VNew_Serial(nq, ctx), atol = N_VNew_Serial(2 * n, ctx);
+  N_Vector l = new_state_vector(2 * n, ctx), lp = new_state_vector(2 * n, ctx),
+           q = N_VNew_Serial(nq, ctx), atol = new_state_vector(2 * n, ctx);
   SUNMatrix J = SUNSparseMatrix(2 * n, 2 * n, 1, CSC_MAT, ctx);
   SUNLinearSolver LS = SUNLinSolNewEmpty(ctx);
   struct Cleanup {

@@ -10,10 +10,14 @@
 //                       [--cylinder-duration 0.1] [--skip-bar]
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "adjoint/fit_problem.hpp"
 #include "bench/foam_cylinder.hpp"
@@ -70,6 +74,7 @@ struct FitTiming {
   double seconds = 0, rms_start = 0, rms_end = 0;
   std::string stop;
   Eigen::VectorXd q;
+  std::vector<std::pair<int, double>> trace;  // (simulations, best RMS so far) at milestones
 };
 
 FitTiming time_fit(const Scenario& s, int max_evaluations) {
@@ -87,6 +92,13 @@ FitTiming time_fit(const Scenario& s, int max_evaluations) {
   t.rms_start = out.history.empty() ? 0 : out.history.front().rms;
   t.rms_end = out.best.rms;
   t.stop = out.stop_reason;
+  double best = HUGE_VAL;
+  for (const FitRecord& r : out.history) {
+    if (r.ok) best = std::min(best, r.rms);
+    if (r.evaluation == 10 || r.evaluation == 25 || r.evaluation == 50 ||
+        r.evaluation == static_cast<int>(out.history.size()))
+      t.trace.emplace_back(r.evaluation, best);
+  }
   t.q.resize(problem.map().size());
   for (int j = 0; j < t.q.size(); ++j) t.q[j] = problem.map().value(out.p, j);
   return t;
@@ -98,6 +110,8 @@ void print(const std::string& what, const FitTiming& t, const std::vector<std::s
              t.rms_start * 1e3, t.rms_end * 1e3, t.stop);
   fmt::print("  fitted:");
   for (size_t j = 0; j < names.size(); ++j) fmt::print(" {} {:.5g}", names[j], t.q[j]);
+  fmt::print("\n  best RMS after N simulations:");
+  for (const auto& [n, rms] : t.trace) fmt::print(" {}: {:.4f} mm", n, rms * 1e3);
   fmt::print("\n");
 }
 

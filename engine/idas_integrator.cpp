@@ -12,6 +12,7 @@
 #include "engine/dae_system.hpp"
 #include "engine/error.hpp"
 #include "engine/schur_solver.hpp"
+#include "engine/state_vector.hpp"
 
 namespace kelvin {
 namespace {
@@ -226,10 +227,10 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   const int n = m.n;
   if (n == 0) throw Error("every node is clamped: there is nothing to simulate");
   check(SUNContext_Create(nullptr, &m.ctx), "SUNContext_Create");
-  m.y = N_VNew_Serial(2 * n, m.ctx);
-  m.yp = N_VNew_Serial(2 * n, m.ctx);
-  m.yout = N_VNew_Serial(2 * n, m.ctx);
-  m.atol = N_VNew_Serial(2 * n, m.ctx);
+  m.y = new_state_vector(2 * n, m.ctx);
+  m.yp = new_state_vector(2 * n, m.ctx);
+  m.yout = new_state_vector(2 * n, m.ctx);
+  m.atol = new_state_vector(2 * n, m.ctx);
   double* y = N_VGetArrayPointer(m.y);
   double* yp = N_VGetArrayPointer(m.yp);
   Eigen::Map<Eigen::VectorXd>(y, n) = x0;
