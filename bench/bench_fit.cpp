@@ -16,7 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <utility>
+#include <tuple>
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
@@ -74,7 +74,7 @@ struct FitTiming {
   double seconds = 0, rms_start = 0, rms_end = 0;
   std::string stop;
   Eigen::VectorXd q;
-  std::vector<std::pair<int, double>> trace;  // (simulations, best RMS so far) at milestones
+  std::vector<std::tuple<int, double, double>> trace;  // (simulations, seconds, best RMS)
 };
 
 FitTiming time_fit(const Scenario& s, int max_evaluations) {
@@ -97,7 +97,7 @@ FitTiming time_fit(const Scenario& s, int max_evaluations) {
     if (r.ok) best = std::min(best, r.rms);
     if (r.evaluation == 10 || r.evaluation == 25 || r.evaluation == 50 ||
         r.evaluation == static_cast<int>(out.history.size()))
-      t.trace.emplace_back(r.evaluation, best);
+      t.trace.emplace_back(r.evaluation, r.seconds, best);
   }
   t.q.resize(problem.map().size());
   for (int j = 0; j < t.q.size(); ++j) t.q[j] = problem.map().value(out.p, j);
@@ -111,7 +111,8 @@ void print(const std::string& what, const FitTiming& t, const std::vector<std::s
   fmt::print("  fitted:");
   for (size_t j = 0; j < names.size(); ++j) fmt::print(" {} {:.5g}", names[j], t.q[j]);
   fmt::print("\n  best RMS after N simulations:");
-  for (const auto& [n, rms] : t.trace) fmt::print(" {}: {:.4f} mm", n, rms * 1e3);
+  for (const auto& [n, sec, rms] : t.trace)
+    fmt::print(" {} ({:.0f} s): {:.4f} mm;", n, sec, rms * 1e3);
   fmt::print("\n");
 }
 
