@@ -122,25 +122,26 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       c.basis.size() == 0
           ? Eigen::VectorXd(xv)
           : Eigen::VectorXd((c.origin + c.basis * xv).cwiseMax(c.lo).cwiseMin(c.hi));
-  // NLopt begins every restart by evaluating its start point, which is the best
-  // point, already simulated at these tolerances: no simulation is spent on it.
-  if (!c.remeasure && c.outcome.best.evaluation != 0 && p == c.outcome.p &&
-      (grad.empty() || c.best_g.size() == p.size())) {
-    const Eigen::VectorXd gx =
-        c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * c.best_g) : c.best_g;
-    if (c.scale == 0) c.scale = objective_scale(true, c.outcome.best.objective, gx);
-    if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * gx;
-    return c.scale * c.outcome.best.objective;
-  }
-  // Near a minimum NLopt's L-BFGS backtracks by 100× per trial down to steps of
-  // 1e-15, though Φ's integration noise (2 % of Φ at the benchmark bar's plateau
-  // at rtol 1e-4, from one trial to the next) hides any decrease below about
-  // 1e-5: five to nine simulations per stalled line search, a fifth of that
-  // fit's budget, bought nothing. The run stops instead, and the restart loop
-  // goes on as after any stalled line search.
-  if (c.outcome.best.evaluation != 0 && !c.remeasure && p != c.outcome.p && next_to_best(c, p)) {
-    c.stalled = true;
-    throw nlopt::forced_stop();
+  if (!c.remeasure && c.outcome.best.evaluation != 0) {
+    // NLopt begins every restart by evaluating its start point, which is the best
+    // point, already simulated at these tolerances: no simulation is spent on it.
+    if (p == c.outcome.p && (grad.empty() || c.best_g.size() == p.size())) {
+      const Eigen::VectorXd gx =
+          c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * c.best_g) : c.best_g;
+      if (c.scale == 0) c.scale = objective_scale(true, c.outcome.best.objective, gx);
+      if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * gx;
+      return c.scale * c.outcome.best.objective;
+    }
+    // Near a minimum NLopt's L-BFGS backtracks by 100× per trial down to steps of
+    // 1e-15, though Φ's integration noise (2 % of Φ at the benchmark bar's plateau
+    // at rtol 1e-4, from one trial to the next) hides any decrease below about
+    // 1e-5: five to nine simulations per stalled line search, a fifth of that
+    // fit's budget, bought nothing. The run stops instead, and the restart loop
+    // goes on as after any stalled line search.
+    if (p != c.outcome.p && next_to_best(c, p)) {
+      c.stalled = true;
+      throw nlopt::forced_stop();
+    }
   }
   try {
     GradientOptions gopt = c.options.gradient;
