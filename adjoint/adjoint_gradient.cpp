@@ -347,6 +347,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       if (steps < points) break;
       points = std::max(points, steps) * 5 / 4 + 8;
     }
+    if (segments == 1) run.ex.note_steps(integ->stats().steps);
     if (k == segments - 1) {
       result.phi_per_marker += integ->quadrature();
       run.set_adjoint_scale(result.phi_per_marker);

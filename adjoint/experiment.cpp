@@ -96,8 +96,9 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
   initial_state(ex.scenario(), model, x0, v0);
 }
 
-bool Experiment::plan_segments(long steps, long budget, double duration) {
+bool Experiment::plan_segments(long steps, long budget, double duration, double tolerance_scale) {
   planned_steps_ = steps;
+  planned_scale_ = tolerance_scale;
   if (steps < budget) {
     segment_ = 0;
     return false;
@@ -259,7 +260,7 @@ void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
 bool ExperimentRun::plan_segments(ExperimentResult& plain) {
   plain.phi_per_marker.setZero(objective.num_markers());
   if (!integrate_segments({t0, t_end}, 1, plain)) return false;
-  ex.plan_segments(plain.forward_stats.steps, checkpoint_budget(), t_end - t0);
+  ex.plan_segments(plain.forward_stats.steps, checkpoint_budget(), t_end - t0, opt.tolerance_scale);
   plain.ok = true;
   return true;
 }

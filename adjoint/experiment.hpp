@@ -29,7 +29,7 @@ struct GradientOptions {
   /// Automatic segments are sized to half of it (see Experiment::plan_segments).
   long checkpoint_steps = 0;
   double segment = 0;          // simulated seconds per adjoint segment; 0 = automatic
-  double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit tightens it)
+  double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit's stages)
   /// An experiment whose forward run takes more IDAS steps than this fails
   /// (0: no limit). The fit bounds its line-search trials so (see run_fit).
   long max_steps = 0;
@@ -84,24 +84,31 @@ class Experiment {
   /// Simulated seconds per segment, the same for every evaluation of this
   /// experiment: boundaries that moved with the parameters would make Φ rough, and
   /// a fit would stall on it. `option` > 0 is used as given; 0 means automatic,
-  /// chosen at the first evaluation that completes (plan_segments). Returns 0 for
-  /// one segment, and while the automatic choice is still open.
+  /// chosen at the first evaluation that completes (plan_segments) at each
+  /// tolerance scale (a fit that tightens its tolerances takes more steps, so it
+  /// plans again). Returns 0 for one segment, and while the choice is still open.
   double segment_length(double option) const { return option > 0 ? option : segment_; }
-  bool segments_planned(double option) const { return option > 0 || segment_ >= 0; }
+  bool segments_planned(double option, double tolerance_scale) const {
+    return option > 0 || (segment_ >= 0 && tolerance_scale == planned_scale_);
+  }
   /// Fixes the automatic plan after an unsegmented run of `steps` steps over
-  /// `duration`: one segment if the run fits the checkpoint budget, otherwise equal
-  /// segments of about half the budget each (the margin lets trial parameters
-  /// that need more steps still fit). True when the run must be redone in segments.
-  bool plan_segments(long steps, long budget, double duration);
-  /// Steps of the planning run (0 before it): a one-segment adjoint reserves room
-  /// for about these, not for its whole budget.
+  /// `duration` at `tolerance_scale`: one segment if the run fits the checkpoint
+  /// budget, otherwise equal segments of about half the budget each (the margin
+  /// lets trial parameters that need more steps still fit). True when the run must
+  /// be redone in segments.
+  bool plan_segments(long steps, long budget, double duration, double tolerance_scale);
+  /// Steps of the planning run (0 before it), raised by later one-segment runs
+  /// that took more (note_steps): a one-segment adjoint reserves room for about
+  /// these, not for its whole budget.
   long planned_steps() const { return planned_steps_; }
+  void note_steps(long steps) { planned_steps_ = std::max(planned_steps_, steps); }
 
  private:
   const Scenario& scenario_;
   std::unique_ptr<FemModel> model_;
   MarkerObjective objective_;
-  double segment_ = -1;  // automatic segment length; < 0 until planned
+  double segment_ = -1;       // automatic segment length; < 0 until planned
+  double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
   long planned_steps_ = 0;
 };
 

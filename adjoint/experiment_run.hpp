@@ -36,7 +36,7 @@ struct ExperimentRun {
   /// Most steps one segment's Hermite points may hold (GradientOptions::checkpoint_steps).
   long checkpoint_budget() const;
   /// True when this evaluation decides the experiment's automatic segment plan.
-  bool planning() const { return !ex.segments_planned(opt.segment); }
+  bool planning() const { return !ex.segments_planned(opt.segment, opt.tolerance_scale); }
   /// Decides it: one plain run over the whole duration (no Hermite points, so no
   /// memory that grows with the duration) into `plain` (Φ, steps), whose step
   /// count Experiment::plan_segments turns into segments. False (with
