@@ -82,6 +82,7 @@ FitTiming time_fit(const Scenario& s, int max_evaluations) {
   FitOptions o;
   o.max_evaluations = max_evaluations;
   o.ftol_rel = 1e-8;
+  o.start_tolerance_scale = fit_start_tolerance_scale(s);  // as `kelvin fit` does
   const auto t0 = std::chrono::steady_clock::now();
   const FitOutcome out = run_fit(problem, problem.map().initial(), o);
   FitTiming t;

@@ -3,6 +3,7 @@
 // (also after SIGINT/SIGTERM, from the best parameters so far).
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include "drivers/commands.hpp"
@@ -30,8 +31,10 @@ std::string progress_line(const FitRecord& r) {
       r.iteration, r.evaluation, r.objective, r.rms * 1e3, r.gradient_norm, r.seconds);
 }
 
-FitOptions fit_options(const FitSpec& fit, const FitArgs& args) {
+FitOptions fit_options(const Scenario& scenario, const FitArgs& args) {
+  const FitSpec& fit = scenario.fit;
   FitOptions o;
+  o.start_tolerance_scale = fit_start_tolerance_scale(scenario);
   o.algorithm = args.algorithm.empty() ? fit.algorithm : args.algorithm;
   o.gradient.method = parse_gradient_method(args.gradient.empty() ? fit.gradient : args.gradient);
   if (o.algorithm == "bobyqa") o.gradient.method = GradientMethod::kNone;
@@ -56,7 +59,7 @@ int run(const FitArgs& args) {
       fmt::print("note: {} has no fit section; fitting every material parameter, global\n",
                  scenario.path);
     problem = std::make_unique<FitProblem>(scenario, scenario.fit.parameters);
-    options = fit_options(scenario.fit, args);
+    options = fit_options(scenario, args);
   } catch (const Error& e) {
     fmt::print(stderr, "error: {}\n", e.what());
     return kExitInputError;
@@ -89,7 +92,9 @@ int run(const FitArgs& args) {
       options.first_evaluation = saved.evaluations;
       options.first_iteration = saved.iterations;
       options.seconds_offset = saved.seconds;
-      options.gradient.tolerance_scale = saved.tolerance_scale;
+      // A coarse stage goes on as the first stage; tightened tolerances stay.
+      options.start_tolerance_scale = std::max(saved.tolerance_scale, 1.0);
+      options.gradient.tolerance_scale = std::min(saved.tolerance_scale, 1.0);
     }
   } catch (const Error& e) {
     fmt::print(stderr, "error: {}\n", e.what());

@@ -29,8 +29,9 @@ struct FitRecord {
   double rms = 0;        // marker RMS (m)
   double gradient_norm = 0;
   double seconds = 0;  // elapsed since the fit started (s)
-  /// Solver tolerances of this trial relative to the scenario's (below 1 once the
-  /// loop tightened them; a resumed fit goes on at the saved scale).
+  /// Solver tolerances of this trial relative to the scenario's (above 1 in the
+  /// coarse stages, see FitOptions::start_tolerance_scale; a resumed fit goes on
+  /// at the saved scale).
   double tolerance_scale = 1;
   Eigen::VectorXd p;  // optimiser-space parameters of this trial
 };
@@ -41,6 +42,11 @@ struct FitOptions {
   int max_evaluations = 200;
   double ftol_rel = 1e-10, xtol_rel = 1e-8;
   double max_seconds = 0;
+  /// Solver tolerances of the first stage relative to the scenario's (≥ 1): the fit
+  /// runs to convergence there, then tightens them 10× per stage down to the
+  /// scenario's. Far from the minimum the misfit dwarfs the integration error of
+  /// loose tolerances, and a simulation with its gradient costs a fraction.
+  double start_tolerance_scale = 1;
   double smoothness = 0;  // γ
   /// Called after every evaluation (the driver prints accepted ones and failures,
   /// appends history, saves the resume state).

@@ -121,7 +121,7 @@ struct Fitted {
 };
 
 Fitted fit(const path& dir, const std::string& tracks, const std::string& start = kStart,
-           const std::string& fit_section = kFitSection) {
+           const std::string& fit_section = kFitSection, double start_tolerance_scale = 1) {
   Fitted f;
   test::write_text(dir / "fit.yaml", bar(start, tracks, fit_section));
   f.scenario = std::make_unique<Scenario>(load_scenario((dir / "fit.yaml").string()));
@@ -130,6 +130,7 @@ Fitted fit(const path& dir, const std::string& tracks, const std::string& start 
   o.max_evaluations = f.scenario->fit.max_evaluations;
   o.ftol_rel = f.scenario->fit.ftol_rel;
   o.xtol_rel = f.scenario->fit.xtol_rel;
+  o.start_tolerance_scale = start_tolerance_scale;
   f.outcome = run_fit(*f.problem, f.problem->map().initial(), o);
   f.q.resize(f.problem->map().size());
   for (int j = 0; j < f.q.size(); ++j) f.q[j] = f.problem->map().value(f.outcome.p, j);
@@ -154,6 +155,31 @@ TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
   expect_recovered(f, 1e-3);
   EXPECT_LT(f.outcome.best.rms, 1e-6);  // metres: the truth is in the model class
   EXPECT_EQ(f.outcome.failures, 0);
+}
+
+// The fit in stages (FitOptions::start_tolerance_scale): 100× the scenario's
+// tolerances first, then 10×, then the scenario's. The early stages only bring the
+// start nearer; the last one must reach the same accuracy as a one-stage fit.
+TEST(Fit, CoarseStagesHandOverToTheScenarioTolerances) {
+  const path dir = test::scratch("fit-stages");
+  const Fitted f =
+      fit(dir, test::simulate_tracks(dir, "truth", bar(kTruth)), kStart, kFitSection, 100);
+  expect_recovered(f, 1e-3);
+  const auto& h = f.outcome.history;
+  ASSERT_FALSE(h.empty());
+  EXPECT_EQ(h.front().tolerance_scale, 100);
+  EXPECT_LE(f.outcome.best.tolerance_scale, 1);
+  std::vector<double> stages;
+  for (size_t i = 0; i < h.size(); ++i) {
+    if (i > 0) {
+      EXPECT_LE(h[i].tolerance_scale, h[i - 1].tolerance_scale) << "evaluation " << i;
+    }
+    if (stages.empty() || stages.back() != h[i].tolerance_scale)
+      stages.push_back(h[i].tolerance_scale);
+  }
+  EXPECT_GE(stages.size(), 3u);  // 100×, 10×, 1× (and tighter if the last one stalled)
+  EXPECT_EQ(stages[1], 10);
+  EXPECT_EQ(stages[2], 1);
 }
 
 // With 20 % of the frames hidden in bursts, L-BFGS stalls in the λ–μ–ν valley (λ

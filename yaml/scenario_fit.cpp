@@ -297,7 +297,7 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
   d.check_keys(n, P,
                {"parameters", "objective", "gradient", "algorithm", "max_evaluations", "ftol_rel",
                 "xtol_rel", "max_seconds", "smoothness", "lcurve", "experiments",
-                "checkpoint_steps", "segment"});
+                "checkpoint_steps", "segment", "start_rtol"});
   FitSpec f;
   f.present = true;
 
@@ -345,6 +345,14 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
   if (const Node v = n["xtol_rel"]) f.xtol_rel = d.non_negative(v, join(P, "xtol_rel"), "");
   if (const Node v = n["max_seconds"])
     f.max_seconds = d.non_negative(v, join(P, "max_seconds"), "s");
+  if (const Node v = n["start_rtol"]) {
+    f.start_rtol = d.positive(v, join(P, "start_rtol"), "");
+    if (f.start_rtol < s.solver.rtol || f.start_rtol >= 1)
+      d.fail(v, join(P, "start_rtol"),
+             fmt::format("must lie in [solver.rtol, 1) = [{:g}, 1): the fit's stages only tighten "
+                         "the tolerances, down to solver.rtol (got {:g})",
+                         s.solver.rtol, f.start_rtol));
+  }
   if (const Node v = n["smoothness"]) f.smoothness = d.non_negative(v, join(P, "smoothness"), "");
   if (const Node v = n["lcurve"]) {
     const std::string LP = join(P, "lcurve");
@@ -368,3 +376,13 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
 }
 
 }  // namespace kelvin::scenario_detail
+
+namespace kelvin {
+
+double fit_start_tolerance_scale(const Scenario& s) {
+  const double rtol = s.solver.rtol;
+  const double start = s.fit.start_rtol > 0 ? s.fit.start_rtol : std::min(1e-3, 100 * rtol);
+  return std::max(1.0, start / rtol);
+}
+
+}  // namespace kelvin
