@@ -158,8 +158,8 @@ void check(int flag, const char* call) {
 /// 3e-6 relative agreement with forward sensitivities; 1e-1 → 508 steps, 1.4e-5;
 /// 1 → 291 steps, 2e-4. At 1e-1 the gradient is as accurate as Φ itself at the same
 /// rtol and costs 2.1–2.9× Φ alone (bench_gradient, 720 tets: 2.9–3.9× at 1e-2);
-/// gradcheck's tight default tolerances still show agreement far below 1e-5, and a
-/// stalled fit tightens both directions together.
+/// gradcheck's tight default tolerances still show agreement far below 1e-5, and the
+/// fit's tolerance stages scale both directions together.
 constexpr double kAdjointAtolFactor = 1e-1;
 
 /// Solves one segment backward from (T1, λ) to T0; adds −∫λvᵀ∂R/∂q dt to dphi_dq.

@@ -105,10 +105,11 @@ int run(const FitArgs& args) {
     fmt::print("kelvin fit: {} — {} parameters, {} experiment(s), {} with {} gradients → {}\n",
                scenario.name, map.size(), problem->num_experiments(), options.algorithm,
                to_string(options.gradient.method), outdir);
-  if (!args.quiet && options.gradient.tolerance_scale < 1)
-    fmt::print(
-        "resuming at solver tolerances {:g}× the scenario's, as the fit had tightened them\n",
-        options.gradient.tolerance_scale);
+  if (!args.quiet && args.resume) {
+    const double scale = options.gradient.tolerance_scale * options.start_tolerance_scale;
+    if (scale != 1)
+      fmt::print("resuming at solver tolerances {:g}× the scenario's, where the fit was\n", scale);
+  }
   options.on_evaluation = [&](const FitRecord& r) {
     history.append(r);
     state.evaluations = r.evaluation;

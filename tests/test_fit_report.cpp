@@ -432,7 +432,7 @@ TEST_F(FitReportTest, InterruptedWithoutMarkerEvaluation) {
 }
 
 // --resume continues from the saved state exactly: parameters to the last bit, and
-// the solver tolerances the loop had tightened to.
+// the solver tolerances of the stage the loop was in.
 TEST(FitState, RoundTripsExactlyWithTheToleranceScale) {
   const fs::path dir = fs::temp_directory_path() / fmt::format("kelvin-fit-state-{}", getpid());
   fs::create_directories(dir);
