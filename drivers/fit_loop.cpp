@@ -398,43 +398,41 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     if (!std::isnan(c.remeasured)) best_before = c.remeasured;
     const bool improved = restart == 0 || best_before - c.outcome.best.objective >
                                               kRestartGain * std::abs(best_before);
-    if (coarse && (converged || !improved || restart >= kMaxRestarts)) {
+    const bool next_stage = coarse && (converged || !improved || restart >= kMaxRestarts);
+    if (next_stage) {
       const double from = c.tolerance_scale;
       c.tolerance_scale = std::max(1.0, c.tolerance_scale / 10);
       c.remeasure = true;
-      restart = 0;
       if (options.on_progress)
         options.on_progress(fmt::format(
             "stage at solver tolerances {:g}× the scenario's converged; going on at {:g}×", from,
             c.tolerance_scale));
-      x.assign(c.outcome.p.data(), c.outcome.p.data() + n);
-      opt.set_maxeval(left);
-      c.scale = 0;
-      c.first_step = std::clamp(2 * c.last_move, 1e-4, kFirstStep);
-      continue;
+    } else {
+      if (gave_up && converged) {
+        if (c.outcome.stop_reason.rfind("converged", 0) == 0) break;
+        c.outcome.stop_reason = fmt::format(
+            "converged: projected gradient {:.1e} times its start value, the line search "
+            "can go no further at the objective's accuracy",
+            c.best_gradient / c.start_gradient);
+        break;
+      }
+      if (!gave_up || left <= 0 || restart >= kMaxRestarts || c.outcome.best.evaluation == 0) break;
+      if (!coarse && algorithm == nlopt::LD_LBFGS &&
+          preconditioned_at != c.outcome.best.evaluation && c.best_g.size() == n &&
+          precondition(c, c.outcome.p, c.best_g)) {
+        preconditioned_at = c.outcome.best.evaluation;
+        // z is unbounded; the box is kept by clamping p (objective).
+        opt.set_lower_bounds(std::vector<double>(n, -HUGE_VAL));
+        opt.set_upper_bounds(std::vector<double>(n, HUGE_VAL));
+        if (options.on_progress)
+          options.on_progress(
+              "line search stalled: restarting in Gauss–Newton-scaled parameters (JᵀJ from one "
+              "sensitivity solve)");
+      } else if (!improved) {
+        break;
+      }
     }
-    if (gave_up && converged) {
-      if (c.outcome.stop_reason.rfind("converged", 0) == 0) break;
-      c.outcome.stop_reason = fmt::format(
-          "converged: projected gradient {:.1e} times its start value, the line search "
-          "can go no further at the objective's accuracy",
-          c.best_gradient / c.start_gradient);
-      break;
-    }
-    if (!gave_up || left <= 0 || restart >= kMaxRestarts || c.outcome.best.evaluation == 0) break;
-    if (!coarse && algorithm == nlopt::LD_LBFGS && preconditioned_at != c.outcome.best.evaluation &&
-        c.best_g.size() == n && precondition(c, c.outcome.p, c.best_g)) {
-      preconditioned_at = c.outcome.best.evaluation;
-      // z is unbounded; the box is kept by clamping p (objective).
-      opt.set_lower_bounds(std::vector<double>(n, -HUGE_VAL));
-      opt.set_upper_bounds(std::vector<double>(n, HUGE_VAL));
-      if (options.on_progress)
-        options.on_progress(
-            "line search stalled: restarting in Gauss–Newton-scaled parameters (JᵀJ from one "
-            "sensitivity solve)");
-    } else if (!improved) {
-      break;
-    }
+    // Coarse stages never precondition, so a new stage always restarts in p.
     if (c.basis.size()) {
       c.origin = c.outcome.p;
       x.assign(n, 0.0);
@@ -447,7 +445,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     // the bench bar's plateau (moves there were 1e-3 long): two or three wasted
     // simulations per restart. Gauss–Newton-scaled restarts keep their own scale.
     c.first_step = c.basis.size() ? kFirstStep : std::clamp(2 * c.last_move, 1e-4, kFirstStep);
-    ++restart;
+    restart = next_stage ? 0 : restart + 1;
   }
   if (c.outcome.best.evaluation == 0) c.outcome.p = p0;
   return c.outcome;
