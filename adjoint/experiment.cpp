@@ -249,12 +249,19 @@ void ExperimentRun::factor_static_stiffness() {
 
 void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
   const double duration = t_end - t0;
-  adjoint_scale = std::max(objective.rms(phi_per_marker), iopt.atol) * duration;
+  misfit_rms = std::max(objective.rms(phi_per_marker), iopt.atol);
+  const Experiment::AdjointPeaks& peaks = ex.adjoint_peaks();
+  if (peaks.x > 0 && peaks.v > 0) {
+    lambda_x_ref = peaks.x * misfit_rms;
+    lambda_v_ref = peaks.v * misfit_rms;
+    return;
+  }
   double mass = 0;
   for (int e = 0; e < model.mesh().num_tets(); ++e)
     mass += model.density()[e] * model.elements()[e].volume;
   const double node_mass = mass / model.mesh().num_nodes();
-  adjoint_velocity_ratio = duration / std::max(node_mass, 1e-300);
+  lambda_x_ref = misfit_rms * duration;
+  lambda_v_ref = lambda_x_ref * duration / std::max(node_mass, 1e-300);
 }
 
 bool ExperimentRun::plan_segments(ExperimentResult& plain) {

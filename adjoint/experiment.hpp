@@ -103,6 +103,16 @@ class Experiment {
   long planned_steps() const { return planned_steps_; }
   void note_steps(long steps) { planned_steps_ = std::max(planned_steps_, steps); }
 
+  /// Peaks of |λx| and |λv| per unit RMS misfit met by an adjoint pass (0 before
+  /// one), renewed when a pass meets λ they mispredict. λ is linear in the misfit, so
+  /// later passes set their absolute tolerances from these
+  /// (ExperimentRun::set_adjoint_scale) instead of from a guess.
+  struct AdjointPeaks {
+    double x = 0, v = 0;
+  };
+  const AdjointPeaks& adjoint_peaks() const { return adjoint_peaks_; }
+  void note_adjoint_peaks(const AdjointPeaks& per_rms) { adjoint_peaks_ = per_rms; }
+
  private:
   const Scenario& scenario_;
   std::unique_ptr<FemModel> model_;
@@ -110,6 +120,7 @@ class Experiment {
   double segment_ = -1;       // automatic segment length; < 0 until planned
   double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
   long planned_steps_ = 0;
+  AdjointPeaks adjoint_peaks_;
 };
 
 }  // namespace kelvin

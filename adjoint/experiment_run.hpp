@@ -69,9 +69,13 @@ struct ExperimentRun {
   /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a.
   bool contract(const double* lambda, double scale, Eigen::MatrixXd& out);
 
-  /// Magnitudes of λx and λv/λx for the backward absolute tolerances, from the
-  /// misfit: λx ~ ∫ ∂g/∂x dt ~ RMS · T, λv ~ λx · T / m (m a mean nodal mass).
-  double adjoint_scale = 0, adjoint_velocity_ratio = 1;
+  /// Typical magnitudes of λx and λv, for the backward absolute tolerances, and the
+  /// RMS misfit they belong to. From the experiment's last adjoint pass scaled by
+  /// the misfit when there was one; otherwise a guess (λx ~ ∫ ∂g/∂x dt ~ RMS · T,
+  /// λv ~ λx · T / m, m a mean nodal mass) that the backward pass checks against
+  /// the λ it meets and corrects (backward_segment).
+  double lambda_x_ref = 0, lambda_v_ref = 0, misfit_rms = 0;
+  bool lambda_refs_missed = false;  // a backward pass was solved again with smaller ones
   void set_adjoint_scale(const Eigen::VectorXd& phi_per_marker);
 
   /// Sensitivity of a static initial state, x₀_p = −K₀⁻¹ ∂R/∂p (zero from rest).

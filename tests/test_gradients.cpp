@@ -182,6 +182,9 @@ TEST(Gradients, AutomaticSegmentsAreChosenOnceFromTheFirstRun) {
   GradientOptions tight;
   tight.checkpoint_steps = steps / 3;
   FitProblem problem(s, specs);
+  // The first adjoint pass measures λ's size, from which later ones set their
+  // backward tolerances: a and b below must share them to agree exactly.
+  ASSERT_TRUE(problem.evaluate(p, tight).ok);
   const Evaluation a = problem.evaluate(p, tight);
   ASSERT_TRUE(a.ok) << a.error;
   const int segments = a.experiments[0].segments;
@@ -222,6 +225,7 @@ TEST(Gradients, SegmentThatOutgrowsItsCheckpointBudgetIsRedoneExactly) {
   GradientOptions roomy, cramped;
   roomy.segment = cramped.segment = s.time.end;  // explicitly one segment
   roomy.checkpoint_steps = 20000;
+  ASSERT_TRUE(problem.evaluate(p, roomy).ok);  // sizes λ for the later passes' tolerances
   const Evaluation a = problem.evaluate(p, roomy);
   ASSERT_TRUE(a.ok) << a.error;
   const long steps = a.experiments[0].forward_stats.steps;
@@ -354,6 +358,49 @@ TEST(Gradients, OccludedBurstsKeepTheGradientExact) {
   FitProblem problem(
       s, {param("elastic.lambda"), param("elastic.mu"), param("viscous.nu"), param("viscous.h")});
   expect_methods_agree(check_gradient(problem, problem.map().initial(), {}));
+}
+
+TEST(Gradients, CoarseToleranceAdjointPointsWhereForwardSensitivitiesDo) {
+  // A fit's first stage runs at rtol 1e-3, near its minimum the misfit is small, and
+  // λ scales with it. Backward tolerances guessed from the misfit were 4·10⁴× too
+  // loose for λv on the benchmark bar: 102 backward steps for 2 s of 35 Hz
+  // oscillation and a gradient with λ's and μ's signs flipped. Here, 1 s of the test
+  // bar 5 % off the truth; forward sensitivities (whose error control covers the
+  // sensitivities themselves) are the reference at the same tolerances.
+  const fs::path dir = scratch("coarse-adjoint");
+  test::ShakenBar truth;
+  truth.material = kTruthNeoHookean.substr(1);
+  truth.end = 1;
+  truth.rtol = 1e-7;
+  truth.atol = 1e-11;
+  truth.tail = kMarkers;
+  const std::string tracks = test::simulate_tracks(dir, "truth", test::shaken_bar_yaml(truth));
+  test::ShakenBar fit = truth;
+  fit.material = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.1e5, mu: 0.95e5 }
+  viscous: { model: power-law, nu: 21, h: 0.84 })";
+  fit.rtol = 1e-3;
+  fit.atol = 1e-7;
+  fit.tail = kMarkers.substr(0, kMarkers.rfind('\n')) + "\n  observed: " + tracks + "\n";
+  write(dir / "fit.yaml", test::shaken_bar_yaml(fit));
+  const Scenario s = load_scenario((dir / "fit.yaml").string());
+  FitProblem problem(
+      s, {param("elastic.lambda"), param("elastic.mu"), param("viscous.nu"), param("viscous.h")});
+  const Eigen::VectorXd p = problem.map().initial();
+  GradientOptions o;
+  o.method = GradientMethod::kForward;
+  const Evaluation forward = problem.evaluate(p, o);
+  ASSERT_TRUE(forward.ok) << forward.error;
+  o.method = GradientMethod::kAdjoint;
+  // The first pass guesses λ's size; the second starts from the sizes the first met.
+  for (int pass = 0; pass < 2; ++pass) {
+    const Evaluation adjoint = problem.evaluate(p, o);
+    ASSERT_TRUE(adjoint.ok) << adjoint.error;
+    const Eigen::VectorXd &a = adjoint.gradient, &f = forward.gradient;
+    EXPECT_GT(a.dot(f) / (a.norm() * f.norm()), 0.999) << "adjoint\n" << a << "\nforward\n" << f;
+    for (int j = 0; j < a.size(); ++j)
+      EXPECT_NEAR(a[j], f[j], 0.05 * std::abs(f[j])) << "parameter " << j << ", pass " << pass;
+  }
 }
 
 }  // namespace
