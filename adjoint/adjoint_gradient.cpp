@@ -177,6 +177,11 @@ constexpr double kAdjointAtolFactor = 0.3;
 /// tolerances 10× looser than intended still gave a wrong gradient (22 steps).
 constexpr double kLooseTolerance = 3;
 
+/// True when `a` exceeds `b` by more than kLooseTolerance.
+bool beyond(double a, double b) {
+  return a > kLooseTolerance * b;
+}
+
 /// Solves one segment backward from (T1, λ) to T0; adds −∫λvᵀ∂R/∂q dt to dphi_dq and
 /// raises `seen` to the peaks of |λx|, |λv| it met.
 bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, double T1,
@@ -252,8 +257,7 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
     }
     seen.x = std::max(seen.x, b.peak.x);
     seen.v = std::max(seen.v, b.peak.v);
-    const bool loose =
-        run.lambda_x_ref > kLooseTolerance * seen.x || run.lambda_v_ref > kLooseTolerance * seen.v;
+    const bool loose = beyond(run.lambda_x_ref, seen.x) || beyond(run.lambda_v_ref, seen.v);
     if (!loose || attempt == 2 || !(seen.x > 0 && seen.v > 0)) break;
     run.lambda_refs_missed = true;
     run.lambda_x_ref = std::min(run.lambda_x_ref, seen.x);
@@ -389,9 +393,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   }
   // The peaks are kept while they predict λ within kLooseTolerance, so that
   // evaluating one point twice gives one gradient.
-  const auto off = [](double met, double ref) {
-    return met > kLooseTolerance * ref || ref > kLooseTolerance * met;
-  };
+  const auto off = [](double met, double ref) { return beyond(met, ref) || beyond(ref, met); };
   if (run.ex.adjoint_peaks().x == 0 || run.lambda_refs_missed || off(seen.x, run.lambda_x_ref) ||
       off(seen.v, run.lambda_v_ref))
     run.ex.note_adjoint_peaks({seen.x / run.misfit_rms, seen.v / run.misfit_rms});

@@ -76,6 +76,9 @@ constexpr double kStallStep = 1e-6;
 /// Backtracking from one overshoot took 3 trials.
 constexpr int kMaxRejections = 4;
 
+/// Each stage's tolerances are this much tighter than the previous one's.
+constexpr double kStageRatio = 10;
+
 struct Context {
   Context(FitProblem& pr, const FitOptions& o) : problem(pr), options(o) {}
   FitProblem& problem;
@@ -104,8 +107,8 @@ struct Context {
   double remeasured = NAN;  // the best's objective at the new tolerances
   bool stalled = false;     // a line-search trial came within kStallStep of the best
   int rejected_in_row = 0;  // evaluations since the best last improved
-  // Φ's relative accuracy at the current stage, 0 while unknown: a tenth of the
-  // change the last hand-over's re-measurement found (the tolerances are 10×
+  // Φ's relative accuracy at the current stage, 0 while unknown: the change the last
+  // hand-over's re-measurement found over kStageRatio (the tolerances are that much
   // tighter); handover_objective is the best's value at the coarser stage.
   double accuracy = 0, handover_objective = NAN;
 };
@@ -159,11 +162,9 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     // 1e-5: five to nine simulations per stalled line search, a fifth of that
     // fit's budget, bought nothing. The run stops instead, and the restart loop
     // goes on as after any stalled line search.
-    if (p != c.outcome.p && next_to_best(c, p)) {
-      c.stalled = true;
-      throw nlopt::forced_stop();
-    }
-    if ((c.tolerance_scale > 1 || c.accuracy > 0) && c.rejected_in_row >= kMaxRejections) {
+    const bool stuck =
+        (c.tolerance_scale > 1 || c.accuracy > 0) && c.rejected_in_row >= kMaxRejections;
+    if ((p != c.outcome.p && next_to_best(c, p)) || stuck) {
       c.stalled = true;
       throw nlopt::forced_stop();
     }
@@ -215,7 +216,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       if (remeasure) {
         c.remeasured = r.objective;
         if (std::isfinite(c.handover_objective) && r.objective > 0)
-          c.accuracy = std::abs(c.handover_objective - r.objective) / r.objective / 10;
+          c.accuracy = std::abs(c.handover_objective - r.objective) / r.objective / kStageRatio;
       }
       if (ev.gradient.size()) {
         c.best_g = g;
@@ -431,7 +432,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     if (next_stage) {
       const double from = c.tolerance_scale;
       c.handover_objective = c.outcome.best.objective;
-      c.tolerance_scale = std::max(1.0, c.tolerance_scale / 10);
+      c.tolerance_scale = std::max(1.0, c.tolerance_scale / kStageRatio);
       c.remeasure = true;
       if (options.on_progress)
         options.on_progress(fmt::format(
