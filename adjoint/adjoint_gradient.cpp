@@ -46,12 +46,19 @@ struct Backward {
 
   explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model), kt(r.n), dt(r.n) {}
 
-  /// Element tangents and ∂g/∂x at the forward state (t, y), computed once per
-  /// state: Newton iterations at one backward time reuse them, and K, D are
-  /// assembled from them only for a new Newton matrix.
+  bool cached_at(double t, const double* y) const {
+    return t == cached_t && std::memcmp(cached_y.data(), y, sizeof(double) * 2 * n) == 0;
+  }
+
+  /// Element tangents, dP/dq and ∂g/∂x at the forward state (t, y), computed once
+  /// per state: Newton iterations at one backward time reuse them, K and D are
+  /// assembled from them only for a new Newton matrix, and the quadrature at the
+  /// converged step (same state) contracts the stored dP/dq instead of evaluating
+  /// every material a second time.
   bool at(double t, const double* y) {
-    if (t == cached_t && std::memcmp(cached_y.data(), y, sizeof(double) * 2 * n) == 0) return true;
-    if (!dae.element_tangents(t, y)) return false;
+    if (cached_at(t, y)) return true;
+    cached_t = NAN;
+    if (!dae.element_tangents(t, y, true)) return false;
     run.model.expand(t, y, nullptr, x, v);
     gx.setZero(n);
     run.objective.add_gradient(t, run.model, x, gx.data());
@@ -111,7 +118,9 @@ int quadrature_b(realtype t, N_Vector y, N_Vector yp, N_Vector l, N_Vector, N_Ve
     Eigen::Map<Eigen::MatrixXd> out(N_VGetArrayPointer(q), ns, ne);
     out.setZero();
     Eigen::MatrixXd tmp = Eigen::MatrixXd::Zero(ns, ne);
-    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, tmp)) return 1;
+    const ElementTangents* cached =
+        b->cached_at(t, N_VGetArrayPointer(y)) ? &b->dae.tangents() : nullptr;
+    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, tmp, cached)) return 1;
     out = tmp;
   } catch (const std::exception& e) {
     b->fatal = e.what();

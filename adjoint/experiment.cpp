@@ -219,15 +219,19 @@ bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
   });
 }
 
-bool ExperimentRun::contract(const double* lambda, double scale, Eigen::MatrixXd& out) {
+bool ExperimentRun::contract(const double* lambda, double scale, Eigen::MatrixXd& out,
+                             const ElementTangents* cached) {
   const auto& elements = model.elements();
-  return deriv.for_each(x, v, a, [&](int e, int s, const Vec12& dR) {
-    double sum = 0;
-    for (int k = 0; k < 12; ++k)
-      if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0)
-        sum += lambda[d] * dR[k];
-    out(s, e) += scale * sum;
-  });
+  return deriv.for_each(
+      x, v, a,
+      [&](int e, int s, const Vec12& dR) {
+        double sum = 0;
+        for (int k = 0; k < 12; ++k)
+          if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0)
+            sum += lambda[d] * dR[k];
+        out(s, e) += scale * sum;
+      },
+      cached);
 }
 
 void ExperimentRun::factor_static_stiffness() {

@@ -66,8 +66,10 @@ struct ExperimentRun {
                std::optional<double> t_stop = std::nullopt);
   /// ∂R/∂p_j over the free dofs for every entry j of p, at the current x, v, a.
   bool param_vectors(Eigen::MatrixXd& B);
-  /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a.
-  bool contract(const double* lambda, double scale, Eigen::MatrixXd& out);
+  /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a (with dP/dq
+  /// from `cached` when given, see ParamDerivatives::for_each).
+  bool contract(const double* lambda, double scale, Eigen::MatrixXd& out,
+                const ElementTangents* cached = nullptr);
 
   /// Typical magnitudes of λx and λv, for the backward absolute tolerances, and the
   /// RMS misfit they belong to. From the experiment's last adjoint pass scaled by

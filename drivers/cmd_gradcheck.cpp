@@ -105,11 +105,14 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
                r.directional_adjoint,
                r.forward.size() ? fmt::format("{:.9g}", r.directional_forward) : "-",
                r.directional_fd);
-    fmt::print("Taylor test |Φ(p+hδ) − Φ(p) − h∇Φ·δ|:\n");
+    fmt::print(
+        "Taylor test r(h) = Φ(p+hδ) − Φ(p) − h∇Φ·δ, and 8 r(h/2) − r(h) (its h³ term "
+        "cancelled):\n");
     for (size_t k = 0; k < r.h.size(); ++k) {
-      fmt::print("  h = 2^{:<3.0f} remainder {:.4e}", std::log2(r.h[k]), r.remainder[k]);
-      if (k > 0 && r.remainder[k] > 0 && r.remainder[k - 1] > 0)
-        fmt::print("  rate {:.3f}", std::log2(r.remainder[k - 1] / r.remainder[k]));
+      fmt::print("  h = 2^{:<3.0f} |r| {:.4e}", std::log2(r.h[k]), r.remainder[k]);
+      if (k < r.corrected.size()) fmt::print("  |8 r(h/2) − r(h)| {:.4e}", r.corrected[k]);
+      if (k > 0 && k < r.corrected.size() && r.corrected[k] > 0 && r.corrected[k - 1] > 0)
+        fmt::print("  rate {:.3f}", std::log2(r.corrected[k - 1] / r.corrected[k]));
       fmt::print("\n");
     }
     fmt::print("median rate {:.3f} (2 for an exact gradient)\n", r.slope);

@@ -27,9 +27,9 @@ bool DaeSystem::stiffness_and_damping(double t, const double* y) {
   return model_.assemble(x_, v_, req, out_);
 }
 
-bool DaeSystem::element_tangents(double t, const double* y) {
+bool DaeSystem::element_tangents(double t, const double* y, bool param_derivatives) {
   model_.expand(t, y, y + n_, x_, v_);
-  return model_.element_tangents(x_, v_, tangents_);
+  return model_.element_tangents(x_, v_, tangents_, param_derivatives);
 }
 
 void DaeSystem::assemble_from_tangents() {

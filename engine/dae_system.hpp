@@ -31,9 +31,10 @@ class DaeSystem {
   /// Assembles K and D at y (into last_assembly()); the blocks of the Newton matrix
   /// that SchurSolver combines.
   bool stiffness_and_damping(double t, const double* y);
-  /// Element tangents at y (the adjoint's per-state cache); false when an element
-  /// is inadmissible (the failing element in tangents()).
-  bool element_tangents(double t, const double* y);
+  /// Element tangents (with param_derivatives, also dP/dq) at y (the adjoint's
+  /// per-state cache); false when an element is inadmissible (the failing element
+  /// in tangents()).
+  bool element_tangents(double t, const double* y, bool param_derivatives = false);
   const ElementTangents& tangents() const { return tangents_; }
   /// K and D into last_assembly() from tangents(), for SchurSolver.
   void assemble_from_tangents();

@@ -287,7 +287,8 @@ bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::M
   out.energy = 0;
   if (request & kTangent) out.dPdF.setZero();
   if (request & kRateTangent) out.dPdFdot.setZero();
-  MaterialResponse resp;
+  if (request & kParamDerivative) out.dPdq.resize(terms_.size());
+  MaterialResponse& resp = out.term;
   for (const auto& term : terms_) {
     const bool viscous = term.model->is_viscous();
     unsigned r = request;
@@ -306,6 +307,7 @@ bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::M
     if (r & kTangent) out.dPdF += resp.dPdF;
     if (r & kRateTangent) out.dPdFdot += resp.dPdFdot;
     if (r & kEnergy) out.energy += resp.energy;
+    if (r & kParamDerivative) out.dPdq[&term - terms_.data()] = resp.dPdq;
   }
   if (!out.P.allFinite()) {
     out.det_F = mp.F.determinant();
@@ -376,15 +378,18 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
 }
 
 bool FemModel::element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                                ElementTangents& out) const {
+                                ElementTangents& out, bool param_derivatives) const {
   const int ne = mesh_.num_tets();
   out.dPdF.resize(ne);
   out.dPdFdot.resize(ne);
   out.mass_damping.resize(ne);
   out.failed_element = -1;
   ElementResponse er;
+  const unsigned request =
+      kStress | kTangent | kRateTangent | (param_derivatives ? kParamDerivative : 0u);
+  out.dPdq.resize(param_derivatives ? ne : 0);
   for (int e = 0; e < ne; ++e) {
-    if (!evaluate_element(e, x, v, kStress | kTangent | kRateTangent, er)) {
+    if (!evaluate_element(e, x, v, request, er)) {
       out.failed_element = e;
       out.failed_det = er.det_F;
       return false;
@@ -392,6 +397,7 @@ bool FemModel::element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
     out.dPdF[e] = er.dPdF;
     out.dPdFdot[e] = er.dPdFdot;
     out.mass_damping[e] = er.mass_damping;
+    if (param_derivatives) out.dPdq[e] = er.dPdq;
   }
   return true;
 }

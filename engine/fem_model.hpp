@@ -86,6 +86,10 @@ struct ElementResponse {
   double mass_damping = 0;  // α of the α M v force
   double energy = 0;        // Ψ (energy density)
   double det_F = 0;         // set when the element is inadmissible
+  std::vector<Mat9X> dPdq;  // per material term, when kParamDerivative was requested
+  /// One term's response, reused from element to element: built afresh per element
+  /// it zeroed two 9×9 matrices and allocated dP/dq every time.
+  MaterialResponse term;
 };
 
 /// Per-element tangents at one state, kept so that the adjoint can form Kᵀλ and
@@ -94,6 +98,9 @@ struct ElementResponse {
 struct ElementTangents {
   std::vector<Mat9> dPdF, dPdFdot;
   std::vector<double> mass_damping;
+  /// [element][term] dP/dq, when asked for: the adjoint's quadrature contracts them
+  /// with λ at the same state, so one material evaluation serves both.
+  std::vector<std::vector<Mat9X>> dPdq;
   int failed_element = -1;
   double failed_det = 0;
 };
@@ -147,10 +154,11 @@ class FemModel {
   bool assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const AssemblyRequest& req,
                 AssemblyOutput& out) const;
 
-  /// Per-element tangents at full positions x and velocities v; false (with
-  /// failed_element set) when some element is inadmissible.
-  bool element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                        ElementTangents& out) const;
+  /// Per-element tangents (and, with param_derivatives, every term's dP/dq) at full
+  /// positions x and velocities v; false (with failed_element set) when some element
+  /// is inadmissible.
+  bool element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, ElementTangents& out,
+                        bool param_derivatives = false) const;
   /// K and D values in pattern() order from element tangents.
   void assemble_tangents(const ElementTangents& t, std::vector<double>& K,
                          std::vector<double>& D) const;

@@ -67,13 +67,16 @@ void ParamDerivatives::update() {
 }
 
 bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                                const Eigen::Matrix3Xd& a, const Visitor& visit) const {
+                                const Eigen::Matrix3Xd& a, const Visitor& visit,
+                                const ElementTangents* cached) const {
   const auto& terms = model_.terms();
   const int nt = static_cast<int>(terms.size());
   const auto& elements = model_.elements();
   MaterialPoint mp;
   MaterialResponse resp;
-  std::vector<Mat9X> dPdq(nt);
+  std::vector<Mat9X> evaluated(nt);
+  std::vector<const Mat9X*> dPdq(nt);
+  if (cached && cached->dPdq.empty()) cached = nullptr;
   std::vector<char> needed(nt, 0);
   for (const auto& s : slots_)
     if (!s.is_density()) needed[s.term] = 1;
@@ -96,8 +99,13 @@ bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
       mp.state = terms[t].state.size() ? terms[t].state.col(e).data() : nullptr;
       if (const int k = terms[t].model->mass_damping_param(); k >= 0) mass_damping += mp.q[k];
       if (!needed[t]) continue;
+      if (cached) {
+        dPdq[t] = &cached->dPdq[e][t];
+        continue;
+      }
       if (!terms[t].model->evaluate(mp, kParamDerivative, resp)) return false;
-      dPdq[t] = resp.dPdq;
+      evaluated[t] = resp.dPdq;
+      dPdq[t] = &evaluated[t];
     }
     const Vec12 ve_flat = ve.reshaped();
     for (int s = 0; s < static_cast<int>(slots_.size()); ++s) {
@@ -109,7 +117,7 @@ bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
         dR = model_.element_mass(e) * rhs.reshaped() / model_.density()[e];
       } else {
         const Material& m = *terms[slot.term].model;
-        Mat3 dP = Eigen::Map<const Mat3>(dPdq[slot.term].col(slot.index).data());
+        Mat3 dP = Eigen::Map<const Mat3>(dPdq[slot.term]->col(slot.index).data());
         if (!dC0_[s].empty())
           for (int t : rest_tangent_users_) {
             // Stresses linear in C₀: evaluating with ∂C₀/∂q in its place gives ∂P/∂q.

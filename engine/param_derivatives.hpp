@@ -39,9 +39,11 @@ class ParamDerivatives {
   /// Calls visit(e, s, dR) for every element e and slot s, with dR = ∂R_e/∂q_{s,e}
   /// over the element's 12 node dofs (clamped ones included; callers skip them).
   /// x, v, a are full nodal fields. False when a material rejects the state.
+  /// `cached`, when it holds dP/dq (FemModel::element_tangents with
+  /// param_derivatives) at this x and v, is used instead of evaluating the materials.
   using Visitor = std::function<void(int e, int s, const Vec12& dR)>;
   bool for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const Eigen::Matrix3Xd& a,
-                const Visitor& visit) const;
+                const Visitor& visit, const ElementTangents* cached = nullptr) const;
 
  private:
   const FemModel& model_;
