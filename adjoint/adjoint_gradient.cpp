@@ -117,11 +117,9 @@ int quadrature_b(realtype t, N_Vector y, N_Vector yp, N_Vector l, N_Vector, N_Ve
     const int ns = static_cast<int>(run.deriv.slots().size());
     Eigen::Map<Eigen::MatrixXd> out(N_VGetArrayPointer(q), ns, ne);
     out.setZero();
-    Eigen::MatrixXd tmp = Eigen::MatrixXd::Zero(ns, ne);
     const ElementTangents* cached =
         b->cached_at(t, N_VGetArrayPointer(y)) ? &b->dae.tangents() : nullptr;
-    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, tmp, cached)) return 1;
-    out = tmp;
+    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, out, cached)) return 1;
   } catch (const std::exception& e) {
     b->fatal = e.what();
     return -1;

@@ -219,7 +219,7 @@ bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
   });
 }
 
-bool ExperimentRun::contract(const double* lambda, double scale, Eigen::MatrixXd& out,
+bool ExperimentRun::contract(const double* lambda, double scale, Eigen::Ref<Eigen::MatrixXd> out,
                              const ElementTangents* cached) {
   const auto& elements = model.elements();
   return deriv.for_each(

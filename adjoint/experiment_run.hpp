@@ -68,7 +68,7 @@ struct ExperimentRun {
   bool param_vectors(Eigen::MatrixXd& B);
   /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a (with dP/dq
   /// from `cached` when given, see ParamDerivatives::for_each).
-  bool contract(const double* lambda, double scale, Eigen::MatrixXd& out,
+  bool contract(const double* lambda, double scale, Eigen::Ref<Eigen::MatrixXd> out,
                 const ElementTangents* cached = nullptr);
 
   /// Typical magnitudes of λx and λv, for the backward absolute tolerances, and the

@@ -468,8 +468,6 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
             "stage at solver tolerances {:g}× the scenario's converged; going on at {:g}×", from,
             c.tolerance_scale));
     } else {
-      // A stall at a known accuracy: the line search cannot see a decrease through
-      // Φ's integration error, and a restart could not either.
       // Once per best point a stalled L-BFGS restarts in Gauss–Newton-scaled
       // parameters (see precondition). A stall within Φ's accuracy gets that restart
       // too: in an ill-conditioned valley (the noise-free bar in stages, λ 1.9× off at
