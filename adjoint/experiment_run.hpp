@@ -53,7 +53,8 @@ struct ExperimentRun {
   /// Attaches the state sensitivities dy/dp_j (every entry j of p) to an integrator
   /// fresh from start() at t₀, and returns their initial values yS0 (2n × p.size()):
   /// forward-sensitivity gradients and marker sensitivities share this one setup.
-  Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ);
+  /// `error_control`: see IdasIntegrator::add_sensitivities.
+  Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ, bool error_control);
   /// Integrates segments 0 … count−1 of T from (x₀, v₀), each restarted with the
   /// first step its predecessor proposed, and adds their Φ and steps to `result`;
   /// `segment_done(k, integ)` sees every finished segment. False on failure.

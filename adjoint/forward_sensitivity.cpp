@@ -36,7 +36,7 @@ void pattern_multiply(const SparsePattern& P, const std::vector<double>& A, cons
 
 }  // namespace
 
-Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ) {
+Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool error_control) {
   const int np = map.size();
   const SparsePattern& P = model.pattern();
 
@@ -99,14 +99,15 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ) {
         }
         return true;
       },
-      yS0, ypS0, pbar);
+      yS0, ypS0, pbar, error_control);
   return yS0;
 }
 
 void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result) {
   const int n = run.n;
   auto integ = run.start(run.t0, run.x0, run.v0);
-  run.add_sensitivities(*integ);
+  // A gradient for the line search: its accuracy is worth the extra steps.
+  run.add_sensitivities(*integ, true);
   integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,
                                                 const double* const* yS, double* const* qS) {
     Eigen::Matrix3Xd x, v;

@@ -289,7 +289,8 @@ Eigen::VectorXd IdasIntegrator::quadrature() const {
 }
 
 void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::MatrixXd& yS0,
-                                       const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar) {
+                                       const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar,
+                                       bool error_control) {
   Impl& m = *impl_;
   m.sens_res = std::move(res);
   m.ns = static_cast<int>(yS0.cols());
@@ -303,7 +304,7 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
   std::vector<double> bar(pbar.data(), pbar.data() + pbar.size());
   check(IDASetSensParams(m.mem, nullptr, bar.data(), nullptr), "IDASetSensParams");
   check(IDASensEEtolerances(m.mem), "IDASensEEtolerances");
-  check(IDASetSensErrCon(m.mem, SUNTRUE), "IDASetSensErrCon");
+  check(IDASetSensErrCon(m.mem, error_control ? SUNTRUE : SUNFALSE), "IDASetSensErrCon");
 }
 
 void IdasIntegrator::add_quadrature_sensitivities(QuadratureSensitivityRhs rhs) {

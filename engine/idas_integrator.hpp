@@ -64,8 +64,11 @@ class IdasIntegrator {
   /// Forward sensitivities (after initialize(); staggered corrector): initial values
   /// yS0, ypS0 (2n × ns) and typical parameter magnitudes pbar that scale the
   /// sensitivity error weights. Quadrature sensitivities follow the quadrature.
+  /// With `error_control` the sensitivities join the local error test (IDAS's
+  /// errconS); without it they ride on the steps the state's own test chooses.
   void add_sensitivities(SensitivityResidual res, const Eigen::MatrixXd& yS0,
-                         const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar);
+                         const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar,
+                         bool error_control);
   void add_quadrature_sensitivities(QuadratureSensitivityRhs rhs);
   /// Quadrature sensitivities at time(): nq × ns.
   Eigen::MatrixXd quadrature_sensitivities() const;
