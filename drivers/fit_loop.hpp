@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
+#include "adjoint/uncertainty.hpp"
 
 namespace kelvin {
 
@@ -66,6 +67,12 @@ struct FitOutcome {
   int evaluations = 0, failures = 0;
   bool interrupted = false;
   std::string stop_reason;  // NLopt's result in words
+  /// Gauss–Newton standard errors computed during the fit (a preconditioned
+  /// restart needs them) at `uncertainty_at`, at the scenario's tolerances; empty
+  /// when none was. When that is the final best point the report reuses them
+  /// instead of repeating the sensitivity solve.
+  ParameterUncertainty uncertainty;
+  Eigen::VectorXd uncertainty_at;
 };
 
 /// Objective value reported for failed trials: finite (NLopt refuses infinities in
