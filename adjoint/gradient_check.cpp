@@ -22,9 +22,10 @@ double relative_error(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
 /// 1.94, 1.98, 1.82 on the occluded test bar, median 1.896 for an adjoint that agreed
 /// with forward sensitivities to 3e-8; with that term cancelled (see the header)
 /// 1.99, 2.05, 1.92, 2.02, 1.68, median 1.99.
+/// r may be shorter than h (the corrected remainders have one entry fewer).
 double median_rate(const std::vector<double>& h, const std::vector<double>& r) {
   std::vector<double> rates;
-  for (size_t i = 0; i + 1 < h.size(); ++i)
+  for (size_t i = 0; i + 1 < std::min(h.size(), r.size()); ++i)
     if (r[i] > 0 && r[i + 1] > 0)
       rates.push_back(std::log(r[i] / r[i + 1]) / std::log(h[i] / h[i + 1]));
   if (rates.empty()) return NAN;
