@@ -21,6 +21,15 @@ struct ParameterUncertainty {
   Eigen::VectorXd std_error;    // model units (q·σ_p for log entries)
 };
 
+/// Standard errors computed once at a point and reused there: the fit's Gauss–Newton
+/// restart and the report both need them at the final best point, and each
+/// computation is a sensitivity solve.
+struct UncertaintyAtPoint {
+  Eigen::VectorXd p;  // empty: none computed
+  ParameterUncertainty value;
+  bool holds(const Eigen::VectorXd& q) const { return p.size() == q.size() && p == q; }
+};
+
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);
 

@@ -140,7 +140,6 @@ int run(const FitArgs& args) {
     session.best = out.best.evaluation ? out.p : state.best;
     session.stop_reason = out.stop_reason;
     session.uncertainty = out.uncertainty;
-    session.uncertainty_at = out.uncertainty_at;
     session.interrupted = out.interrupted || g_interrupted;
     if (!scenario.fit.lcurve.empty() && !session.interrupted) {
       if (!args.quiet) fmt::print("L-curve over {} values of gamma\n", scenario.fit.lcurve.size());

@@ -314,9 +314,12 @@ double smoothness_roughness(const std::vector<std::pair<int, int>>& pairs,
 /// −(1/κ)(JᵀJ)⁻¹∇Φ, κ = 2Φ / ‖r‖² relating Φ's time integral to the sum over
 /// frames. False when JᵀJ is unavailable (too many parameters, singular).
 bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd& gradient) {
-  c.outcome.uncertainty = gauss_newton_uncertainty(c.problem, best, c.options.gradient.interrupt);
-  c.outcome.uncertainty_at = best;
-  const ParameterUncertainty& u = c.outcome.uncertainty;
+  UncertaintyAtPoint& cache = c.outcome.uncertainty;
+  if (!cache.holds(best)) {
+    cache.value = gauss_newton_uncertainty(c.problem, best, c.options.gradient.interrupt);
+    cache.p = best;
+  }
+  const ParameterUncertainty& u = cache.value;
   const double phi = c.outcome.best.misfit;
   const int n = static_cast<int>(best.size());
   if (!u.ok || !(phi > 0) || !(u.sigma > 0) || u.observations <= n) return false;

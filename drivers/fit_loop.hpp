@@ -67,12 +67,9 @@ struct FitOutcome {
   int evaluations = 0, failures = 0;
   bool interrupted = false;
   std::string stop_reason;  // NLopt's result in words
-  /// Gauss–Newton standard errors computed during the fit (a preconditioned
-  /// restart needs them) at `uncertainty_at`, at the scenario's tolerances; empty
-  /// when none was. When that is the final best point the report reuses them
-  /// instead of repeating the sensitivity solve.
-  ParameterUncertainty uncertainty;
-  Eigen::VectorXd uncertainty_at;
+  /// The Gauss–Newton standard errors a preconditioned restart last computed (at the
+  /// scenario's tolerances); the report reuses them when they are at the final best.
+  UncertaintyAtPoint uncertainty;
 };
 
 /// Objective value reported for failed trials: finite (NLopt refuses infinities in

@@ -195,9 +195,9 @@ std::string write_fit_outputs(FitProblem& problem, const FitSession& s,
       // The fit's last Gauss–Newton restart often began at the final best point: its
       // sensitivity solve (the cost of the whole report on the benchmark bar) is not
       // repeated.
-      const bool computed = s.uncertainty_at.size() == s.best.size() && s.uncertainty_at == s.best;
-      const ParameterUncertainty u =
-          computed ? s.uncertainty : gauss_newton_uncertainty(problem, s.best, interrupt);
+      const ParameterUncertainty u = s.uncertainty.holds(s.best)
+                                         ? s.uncertainty.value
+                                         : gauss_newton_uncertainty(problem, s.best, interrupt);
       if (u.ok) {
         data.std_error = u.std_error;
         data.noise_sigma = u.sigma;

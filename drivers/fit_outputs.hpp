@@ -22,8 +22,7 @@ struct FitSession {
   double seconds = 0;
   bool interrupted = false;
   std::vector<LcurvePoint> lcurve;
-  ParameterUncertainty uncertainty;  // see FitOutcome::uncertainty
-  Eigen::VectorXd uncertainty_at;
+  UncertaintyAtPoint uncertainty;  // see FitOutcome::uncertainty
 };
 
 /// Writes the outputs into session.outdir and returns the path of report.md.
