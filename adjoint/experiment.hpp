@@ -33,6 +33,12 @@ struct GradientOptions {
   /// An experiment whose forward run takes more IDAS steps than this fails
   /// (0: no limit). The fit bounds its line-search trials so (see run_fit).
   long max_steps = 0;
+  /// Paces that limit: by the time a fraction f of the run's duration is reached,
+  /// more than max_steps · max(f, step_pace_floor) steps fail the run already
+  /// (1: only the total counts). With the floor at 1/k and max_steps k times a
+  /// reference run's steps, a run that takes no more steps than the reference
+  /// never fails, however its steps are spread in time.
+  double step_pace_floor = 1;
   const std::atomic<bool>* interrupt = nullptr;
 };
 
@@ -55,6 +61,7 @@ struct ExperimentResult {
   bool ok = false;
   std::string error;  // why the simulation failed (names the time)
   double t_reached = 0;
+  double t_furthest = 0;  // latest time any pass reached: the progress the step limit is paced by
   Eigen::VectorXd phi_per_marker;  // Φᵢ
   double phi = 0, rms = 0;         // Σ Φᵢ and the RMS distance (m)
   Eigen::VectorXd gradient;        // dΦ/dp (empty without a gradient)

@@ -344,12 +344,18 @@ void* IdasIntegrator::sundials_context() const {
   return impl_->ctx;
 }
 
-bool IdasIntegrator::advance_to(double tout, double t_stop) {
+double IdasIntegrator::solver_time() const {
+  return impl_->t_solver;
+}
+
+bool IdasIntegrator::advance_to(double tout, double t_stop, long step_budget) {
   Impl& m = *impl_;
   const int n = m.n;
   check(IDASetStopTime(m.mem, t_stop), "IDASetStopTime");
+  error_.clear();
   // One step at a time, so that the order of every step can be counted.
   while (m.t_solver < tout) {
+    if (step_budget > 0 && m.stats.steps >= step_budget) return false;
     if (m.stats.steps >= m.opt.max_steps) {
       // Most often the steps shrank because some element is collapsing: say which.
       IDAGetDky(m.mem, m.t_solver, 0, m.yout);

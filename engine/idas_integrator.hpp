@@ -82,7 +82,9 @@ class IdasIntegrator {
 
   /// Integrates until `tout` (never past `t_stop`), then interpolates the state at
   /// tout. Returns false on solver failure; error() then says why and at which time.
-  bool advance_to(double tout, double t_stop);
+  /// With `step_budget` > 0 it also returns false, with error() empty, when this
+  /// integrator's steps reach the budget before tout (the caller says why).
+  bool advance_to(double tout, double t_stop, long step_budget = 0);
 
   /// The first step for a fresh integrator restarted from the state at time():
   /// the largest first-order step whose local error, ½h²‖ÿ‖ in IDAS's error norm,
@@ -93,6 +95,7 @@ class IdasIntegrator {
   double restart_step() const;
 
   double time() const { return t_; }                       // time of the interpolated state
+  double solver_time() const;                              // how far IDAS has stepped
   const Eigen::VectorXd& positions() const { return x_; }  // free dofs at time()
   const Eigen::VectorXd& velocities() const { return v_; }
   const std::string& error() const { return error_; }

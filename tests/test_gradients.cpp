@@ -216,7 +216,8 @@ TEST(Gradients, AutomaticSegmentsAreChosenOnceFromTheFirstRun) {
 
 // One segment is one IDAS checkpoint interval. When a run needs more steps than
 // the interval was given, it is integrated again with room for all of them, and
-// the gradient is exactly the one of a run that had the room from the start.
+// the gradient is exactly the one of a run that had the room from the start; the
+// first run does not count against a line-search trial's step limit.
 TEST(Gradients, SegmentThatOutgrowsItsCheckpointBudgetIsRedoneExactly) {
   const fs::path dir = scratch("overrun");
   const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
@@ -236,10 +237,16 @@ TEST(Gradients, SegmentThatOutgrowsItsCheckpointBudgetIsRedoneExactly) {
   EXPECT_EQ(b.experiments[0].backward_steps, a.experiments[0].backward_steps);
   EXPECT_EQ(a.phi, b.phi);
   EXPECT_EQ((a.gradient - b.gradient).norm(), 0.0);
+  // A trial's step limit counts the redo, not the run it retraces.
+  cramped.max_steps = steps + steps / 8;
+  const Evaluation limited = problem.evaluate(p, cramped);
+  EXPECT_TRUE(limited.ok) << limited.error;
+  EXPECT_EQ(limited.phi, a.phi);
 }
 
 // The fit bounds each line-search trial's steps: past the limit the evaluation
-// fails (and says where it stopped) instead of running on, for every method.
+// fails (and says where it stopped) instead of running on, for every method; the
+// paced limit fails a run early that is on course to exceed it.
 TEST(Gradients, StepLimitFailsTheEvaluationAndSaysWhere) {
   const fs::path dir = scratch("step-limit");
   const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
@@ -262,6 +269,23 @@ TEST(Gradients, StepLimitFailsTheEvaluationAndSaysWhere) {
     EXPECT_LT(cut.experiments[0].t_reached, s.time.end);
     o.max_steps = steps;
     EXPECT_TRUE(problem.evaluate(p, o).ok) << to_string(method);
+
+    // Paced: a run of no more steps than the reference passes a limit of k× its
+    // steps paced with floor 1/k, whatever its profile in time ...
+    for (int k : {2, 4}) {
+      o.max_steps = k * steps;
+      o.step_pace_floor = 1.0 / k;
+      EXPECT_TRUE(problem.evaluate(p, o).ok) << to_string(method) << " k = " << k;
+    }
+    // ... and a run over the limit fails no later than unpaced, here earlier.
+    o.max_steps = steps / 2;
+    o.step_pace_floor = 0.05;
+    const Evaluation paced = problem.evaluate(p, o);
+    o.step_pace_floor = 1;
+    EXPECT_FALSE(paced.ok) << to_string(method);
+    EXPECT_NE(paced.error.find(fmt::format("{} over the whole run", steps / 2)), std::string::npos)
+        << paced.error;
+    EXPECT_LT(paced.experiments[0].t_reached, cut.experiments[0].t_reached) << to_string(method);
   }
 }
 
