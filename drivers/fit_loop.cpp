@@ -193,7 +193,7 @@ FitRecord record_of(Context& c, const Eigen::VectorXd& p, const Evaluation& ev,
 /// the best point's Φ again at kStageRatio× tighter tolerances. Without it such a
 /// fit could not tell a stall from a hard line search: on the bench bar with its
 /// scenario at rtol 1e-3 it spent its last 10 evaluations (24 s of 70), all
-/// rejected, within 8 % of the best.
+/// rejected, their RMS within 8 % of the best.
 void probe_accuracy(Context& c) {
   c.probed = true;
   if (c.outcome.evaluations >= c.budget) return;
