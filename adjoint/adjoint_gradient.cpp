@@ -390,13 +390,13 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       integ->record_checkpoints(points);
       ok = run.advance(*integ, T[k + 1], result);
       const long steps = integ->stats().steps;
-      result.forward_stats.steps += steps;
-      if (!ok || steps < points) break;
-      result.forward_stats.steps -= steps;
+      if (!ok || steps < points) {
+        result.forward_stats.steps += steps + overrun;
+        break;
+      }
       overrun += steps;
       points = std::max(points, steps) * 5 / 4 + 8;
     }
-    result.forward_stats.steps += overrun;
     if (!ok) return;
     if (segments == 1) run.ex.note_steps(integ->stats().steps);
     if (k == segments - 1) {

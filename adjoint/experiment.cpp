@@ -194,15 +194,16 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
         std::ceil(static_cast<double>(opt.max_steps) * std::max(progress, opt.step_pace_floor)));
     const long budget = opt.max_steps > 0 ? std::max(1L, limit - result.forward_stats.steps) : 0;
     if (!integ.advance_to(t, t_stop.value_or(t1), budget)) {
-      result.error = !integ.error().empty()
-                         ? integ.error()
-                         : fmt::format(
-                               "abandoned at t = {:.6g} s after more than {} integrator steps "
-                               "(the limit for this trial{})",
-                               integ.solver_time(), limit,
-                               limit < opt.max_steps
-                                   ? fmt::format(" by then, {} over the whole run", opt.max_steps)
-                                   : "");
+      result.error = integ.error();
+      if (result.error.empty()) {  // the budget ran out
+        const std::string paced =
+            limit < opt.max_steps ? fmt::format(" by then, {} over the whole run", opt.max_steps)
+                                  : "";
+        result.error = fmt::format(
+            "abandoned at t = {:.6g} s after more than {} integrator steps (the limit for this "
+            "trial{})",
+            integ.solver_time(), limit, paced);
+      }
       result.t_reached = integ.solver_time();
       return false;
     }
