@@ -24,10 +24,13 @@ struct Beam {
 };
 
 /// The bar with `cells_across` cells over its height, neo-Hookean with (E, ν) plus
-/// optional extra terms (e.g. damping), under gravity −g e_z.
-inline Beam make_beam(int cells_across, double gravity, std::vector<MaterialTerm> extra = {}) {
+/// optional extra terms (e.g. damping), under gravity −g e_z, its clamped end's
+/// lower corner at `origin`.
+inline Beam make_beam(int cells_across, double gravity, std::vector<MaterialTerm> extra = {},
+                      const Eigen::Vector3d& origin = Eigen::Vector3d::Zero()) {
   Beam b;
-  b.mesh = generate_box({0, 0, 0}, {kLength, kHeight, kHeight}, kHeight / cells_across);
+  b.mesh = generate_box(origin, origin + Eigen::Vector3d(kLength, kHeight, kHeight),
+                        kHeight / cells_across);
   const double lambda = kE * kPoisson / ((1 + kPoisson) * (1 - 2 * kPoisson));
   const double mu = kE / (2 * (1 + kPoisson));
   const int ne = b.mesh.num_tets();
@@ -39,7 +42,7 @@ inline Beam make_beam(int cells_across, double gravity, std::vector<MaterialTerm
   }
   NodeSelection root;
   root.axis = 0;
-  root.at = 0;
+  root.at = origin.x();
   b.model =
       std::make_unique<FemModel>(b.mesh, std::move(terms), Eigen::VectorXd::Constant(ne, kRho),
                                  Eigen::Vector3d(0, 0, -gravity),
@@ -52,10 +55,11 @@ inline Beam make_beam(int cells_across, double gravity, std::vector<MaterialTerm
 /// Mean vertical displacement of the free end face (less sensitive to the local
 /// mesh than a single node).
 inline double tip_deflection(const Beam& b, const Eigen::VectorXd& x) {
+  const double end = b.mesh.nodes.row(0).minCoeff() + kLength;
   double sum = 0;
   int count = 0;
   for (int a = 0; a < b.mesh.num_nodes(); ++a)
-    if (std::abs(b.mesh.nodes(0, a) - kLength) < 1e-12) {
+    if (std::abs(b.mesh.nodes(0, a) - end) < 1e-9) {
       sum += x[b.model->dof(a, 2)] - b.mesh.nodes(2, a);
       ++count;
     }
