@@ -5,7 +5,8 @@
 ///   r(h) = Φ(p + hδ) − Φ(p) − h ∇Φ·δ = c₂h² + c₃h³ + …,
 /// for h halved from level to level. The rate of |8 r(h/2) − r(h)| = |c₂|h² + O(h⁴)
 /// (the h³ term cancels) must be ≈ 2 when the gradient is right; a gradient error e
-/// adds 3eh to it, and the rate falls to ≈ 1.
+/// adds 3eh to it, and the rate falls to ≈ 1. Only levels above Φ's integration
+/// noise count.
 #include <Eigen/Core>
 #include <vector>
 
@@ -33,7 +34,11 @@ struct GradientCheckReport {
   double directional_adjoint = 0, directional_forward = 0, directional_fd = 0;
   std::vector<double> h, remainder;  // |r(h)|
   std::vector<double> corrected;     // |8 r(h/2) − r(h)| per h but the last
-  double slope = 0;                  // median rate of `corrected` between consecutive h
+  /// |Φ − Φ at 10× tighter tolerances|: corrected remainders within 100× of it are
+  /// integration noise, not Taylor terms.
+  double noise = 0;
+  int resolved_levels = 0;  // leading entries of `corrected` above that noise
+  double slope = 0;         // median rate of those entries between consecutive h (NaN: < 2)
   double adjoint_vs_forward = 0, adjoint_vs_fd = 0;  // relative errors (∞-norms)
   double seconds_forward_only = 0, seconds_adjoint = 0, seconds_forward_sensitivities = 0;
 };
