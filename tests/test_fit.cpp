@@ -31,9 +31,10 @@ constexpr Motion kShaken{0.004, 0.003, 17, 13, 0.2};
 // lower than kShaken's, which is what separates ν from the flow index h.
 constexpr Motion kSlow{0.008, 0.006, 3, 2, 0.4};
 
-/// The bar with four markers along its length sampled at 1 kHz.
+/// The bar with four markers along its length sampled at 1 kHz, simulated at `rtol`
+/// (atol 1e-4 × rtol m).
 std::string bar(const std::string& material, const std::string& observed = "",
-                const std::string& fit = "", const Motion& motion = kShaken) {
+                const std::string& fit = "", const Motion& motion = kShaken, double rtol = 1e-7) {
   test::ShakenBar bar;
   bar.name = "fit-bar";
   bar.material = material.substr(1);  // the constants below start with a newline
@@ -43,8 +44,8 @@ std::string bar(const std::string& material, const std::string& observed = "",
   bar.frequency_z = motion.frequency_z;
   bar.end = motion.end;
   bar.output_rate = 1000;
-  bar.rtol = 1e-7;
-  bar.atol = 1e-11;
+  bar.rtol = rtol;
+  bar.atol = 1e-4 * rtol;
   bar.tail = R"(markers:
   rest:
     - { name: tip, at: [0.06, 0.01, 0.01] }
@@ -149,18 +150,12 @@ void expect_recovered(const Fitted& f, double tolerance, double nu_tolerance = 0
         << f.outcome.evaluations << " evaluations (" << f.outcome.stop_reason << ")";
 }
 
-// One stage at the scenario's tolerances (start_tolerance_scale 1).
-TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
-  const path dir = test::scratch("fit-noise-free");
-  const Fitted f = fit(dir, test::simulate_tracks(dir, "truth", bar(kTruth)));
-  expect_recovered(f, 1e-3);
-  EXPECT_LT(f.outcome.best.rms, 1e-6);  // metres: the truth is in the model class
-  EXPECT_EQ(f.outcome.failures, 0);
-  // In one stage Φ's accuracy is measured once, when a line search first looks
-  // stuck: the best point of that moment, re-simulated 10× tighter.
+/// Records of evaluations at tolerances below the scenario's (the accuracy
+/// probe's), each checked to be a re-simulation of the best point of its moment.
+int accuracy_probes(const FitOutcome& outcome) {
   int probes = 0;
   Eigen::VectorXd best;
-  for (const FitRecord& r : f.outcome.history) {
+  for (const FitRecord& r : outcome.history) {
     if (r.tolerance_scale < 1) {
       ++probes;
       EXPECT_EQ(r.tolerance_scale, 0.1);
@@ -169,9 +164,37 @@ TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
     }
     if (r.accepted) best = r.p;
   }
-  EXPECT_EQ(probes, 1);
-  EXPECT_NE(f.outcome.stop_reason.find("within the objective's accuracy"), std::string::npos)
-      << f.outcome.stop_reason;
+  return probes;
+}
+
+// One stage at the scenario's tolerances (start_tolerance_scale 1).
+TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
+  const path dir = test::scratch("fit-noise-free");
+  const Fitted f = fit(dir, test::simulate_tracks(dir, "truth", bar(kTruth)));
+  expect_recovered(f, 1e-3);
+  EXPECT_LT(f.outcome.best.rms, 1e-6);  // metres: the truth is in the model class
+  EXPECT_EQ(f.outcome.failures, 0);
+  EXPECT_EQ(f.outcome.stop_reason.rfind("converged", 0), 0u) << f.outcome.stop_reason;
+  EXPECT_LE(accuracy_probes(f.outcome), 1);
+}
+
+// One stage at loose tolerances (rtol 1e-3) against tracks simulated at 1e-7: near
+// the minimum Φ is mostly integration error, and line searches stall. Φ's accuracy
+// is then measured once, when a line search first looks stuck (the best point of
+// that moment re-simulated 10× tighter), and the stall ends the fit with advice.
+TEST(Fit, OneStageStallAtLooseTolerancesMeasuresTheAccuracyOnce) {
+  const path dir = test::scratch("fit-loose");
+  const std::string tracks = test::simulate_tracks(dir, "truth", bar(kTruth));
+  test::write_text(dir / "fit.yaml", bar(kStart, tracks, kFitSection, kShaken, 1e-3));
+  const Scenario s = load_scenario((dir / "fit.yaml").string());
+  FitProblem problem(s, s.fit.parameters);
+  FitOptions o;
+  o.max_evaluations = s.fit.max_evaluations;
+  const FitOutcome out = run_fit(problem, problem.map().initial(), o);
+  EXPECT_EQ(accuracy_probes(out), 1);
+  EXPECT_NE(out.stop_reason.find("within the objective's accuracy"), std::string::npos)
+      << out.stop_reason;
+  EXPECT_LT(out.best.rms, 0.1 * out.history.front().rms);
 }
 
 // The fit in stages (FitOptions::start_tolerance_scale): 100× the scenario's
