@@ -243,7 +243,7 @@ TEST(Fit, OccludedBurstsStillRecoverTheParameters) {
 // All four parameters of the issue (λ, μ, ν, h), each 2× off, from two motions of
 // the same bar fitted jointly (Real2Sim Fig. 13): the 17/13 Hz shaking alone leaves
 // ν γ̇^(h−1) nearly one number (a single-motion fit stopped at ν 26, h 0.62), the
-// slow sway adds strain rates several times lower. Long (~8 min): ctest -L long.
+// slow sway adds strain rates several times lower. Long (~7 min): ctest -L long.
 TEST(FitLong, FlowIndexFromTwoMotionsAtDifferentStrainRates) {
   const path dir = test::scratch("fit-two-motions");
   const std::string start = R"(
