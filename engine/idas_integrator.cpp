@@ -134,10 +134,8 @@ int error_weights(N_Vector y, N_Vector weights, void* data) {
   const double* yy = N_VGetArrayPointer(y);
   const double* atol = N_VGetArrayPointer(m.atol);
   double* w = N_VGetArrayPointer(weights);
-  for (int i = 0; i < 2 * m.n; ++i) {
-    const double size = std::abs(i < m.n ? yy[i] - m.rest[i] : yy[i]);
-    w[i] = 1.0 / (m.opt.rtol * size + atol[i]);
-  }
+  for (int i = 0; i < m.n; ++i) w[i] = 1.0 / (m.opt.rtol * std::abs(yy[i] - m.rest[i]) + atol[i]);
+  for (int i = m.n; i < 2 * m.n; ++i) w[i] = 1.0 / (m.opt.rtol * std::abs(yy[i]) + atol[i]);
   return 0;
 }
 
@@ -328,13 +326,10 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
   // error_weights, which measures positions from the rest shape. These are the same
   // weights, pbar/(rtol·pbar|s| + atol), without that origin: sensitivities are
   // derivatives of displacements already.
-  std::vector<N_Vector> atol_s(m.ns);
-  for (int i = 0; i < m.ns; ++i) {
-    atol_s[i] = N_VClone(m.atol);
-    N_VScale(1.0 / pbar[i], m.atol, atol_s[i]);
-  }
-  const int flag = IDASensSVtolerances(m.mem, m.opt.rtol, atol_s.data());
-  for (N_Vector v : atol_s) N_VDestroy(v);
+  N_Vector* atol_s = N_VCloneVectorArray(m.ns, m.atol);
+  for (int i = 0; i < m.ns; ++i) N_VScale(1.0 / pbar[i], m.atol, atol_s[i]);
+  const int flag = IDASensSVtolerances(m.mem, m.opt.rtol, atol_s);
+  N_VDestroyVectorArray(atol_s, m.ns);
   check(flag, "IDASensSVtolerances");
   check(IDASetSensErrCon(m.mem, error_control ? SUNTRUE : SUNFALSE), "IDASetSensErrCon");
 }

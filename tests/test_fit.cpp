@@ -122,9 +122,10 @@ struct Fitted {
 };
 
 Fitted fit(const path& dir, const std::string& tracks, const std::string& start = kStart,
-           const std::string& fit_section = kFitSection, double start_tolerance_scale = 1) {
+           const std::string& fit_section = kFitSection, double start_tolerance_scale = 1,
+           double rtol = 1e-7) {
   Fitted f;
-  test::write_text(dir / "fit.yaml", bar(start, tracks, fit_section));
+  test::write_text(dir / "fit.yaml", bar(start, tracks, fit_section, kShaken, rtol));
   f.scenario = std::make_unique<Scenario>(load_scenario((dir / "fit.yaml").string()));
   f.problem = std::make_unique<FitProblem>(*f.scenario, f.scenario->fit.parameters);
   FitOptions o;
@@ -184,13 +185,9 @@ TEST(Fit, NoiseFreeRecoversNeoHookeanAndViscosityFromTwiceOff) {
 // that moment re-simulated 10× tighter), and the stall ends the fit with advice.
 TEST(Fit, OneStageStallAtLooseTolerancesMeasuresTheAccuracyOnce) {
   const path dir = test::scratch("fit-loose");
-  const std::string tracks = test::simulate_tracks(dir, "truth", bar(kTruth));
-  test::write_text(dir / "fit.yaml", bar(kStart, tracks, kFitSection, kShaken, 1e-3));
-  const Scenario s = load_scenario((dir / "fit.yaml").string());
-  FitProblem problem(s, s.fit.parameters);
-  FitOptions o;
-  o.max_evaluations = s.fit.max_evaluations;
-  const FitOutcome out = run_fit(problem, problem.map().initial(), o);
+  const Fitted f =
+      fit(dir, test::simulate_tracks(dir, "truth", bar(kTruth)), kStart, kFitSection, 1, 1e-3);
+  const FitOutcome& out = f.outcome;
   EXPECT_EQ(accuracy_probes(out), 1);
   EXPECT_NE(out.stop_reason.find("within the objective's accuracy"), std::string::npos)
       << out.stop_reason;
