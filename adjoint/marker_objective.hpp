@@ -3,10 +3,10 @@
 /// The marker misfit of Real2Sim Eq. 15,
 ///   Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ(t) − x̄ᵢ(t)‖² dt   over the window [t₀, t₁],
 /// with x*ᵢ the simulated marker (barycentric in its tet) and x̄ᵢ the observed track,
-/// a cubic Hermite curve between capture frames (slopes from neighbouring frames). Interval rule
-/// for occlusion: marker i contributes on [t_k, t_k+1] only when it was seen in both frames k and
-/// k+1; elsewhere (and outside the frames' span) its integrand is zero, never an extrapolation. One
-/// quadrature component per marker, so per-marker errors come for free.
+/// a not-a-knot cubic spline through each run of consecutive frames in which the marker was seen.
+/// Interval rule for occlusion: marker i contributes on [t_k, t_k+1] only when it was seen in both
+/// frames k and k+1; elsewhere (and outside the frames' span) its integrand is zero, never an
+/// extrapolation. One quadrature component per marker, so per-marker errors come for free.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -46,14 +46,13 @@ class MarkerObjective {
  private:
   /// Observed position of marker i at t; false when unobserved there.
   bool observed(int i, double t, Eigen::Vector3d& xbar) const;
-  /// Velocity of marker i's track at frame k, for the cubic between k and `other`.
-  Eigen::Vector3d frame_slope(int i, size_t k, size_t other) const;
 
   std::vector<std::string> names_;
   std::vector<MarkerEmbedding> embedding_;
   std::vector<double> weight_, weighted_time_;
   std::vector<double> times_;
-  std::vector<Eigen::Matrix3Xd> track_;  // per marker 3 × frames (NaN = occluded)
+  std::vector<Eigen::Matrix3Xd> track_;   // per marker 3 × frames (NaN = occluded)
+  std::vector<Eigen::Matrix3Xd> slopes_;  // the spline's velocity at each seen frame
   double t0_ = 0, t1_ = 0;
 };
 

@@ -7,6 +7,7 @@
 #include <limits>
 #include <numbers>
 
+#include "engine/cubic_spline.hpp"
 #include "engine/error.hpp"
 
 namespace kelvin {
@@ -57,33 +58,6 @@ RigidPose SinusoidMotion::at(double t) const {
 
 namespace {
 
-/// Natural cubic spline second derivatives of each row of `y` over knots t.
-Eigen::MatrixXd spline_second_derivatives(const std::vector<double>& t, const Eigen::MatrixXd& y) {
-  const int n = static_cast<int>(t.size());
-  Eigen::MatrixXd m = Eigen::MatrixXd::Zero(y.rows(), n);
-  if (n < 3) return m;
-  // Thomas algorithm on the interior equations (natural ends: m₀ = m_{n−1} = 0).
-  std::vector<double> diag(n), upper(n);
-  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(y.rows(), n);
-  for (int i = 1; i < n - 1; ++i) {
-    const double h0 = t[i] - t[i - 1], h1 = t[i + 1] - t[i];
-    diag[i] = 2 * (h0 + h1);
-    upper[i] = h1;
-    rhs.col(i) = 6 * ((y.col(i + 1) - y.col(i)) / h1 - (y.col(i) - y.col(i - 1)) / h0);
-    if (i > 1) {
-      const double lower = h0, f = lower / diag[i - 1];
-      diag[i] -= f * upper[i - 1];
-      rhs.col(i) -= f * rhs.col(i - 1);
-    }
-  }
-  for (int i = n - 2; i >= 1; --i) {
-    Eigen::VectorXd r = rhs.col(i);
-    if (i < n - 2) r -= upper[i] * m.col(i + 1);
-    m.col(i) = r / diag[i];
-  }
-  return m;
-}
-
 /// Bilinear form with M(q) = B(q, q) the unnormalised rotation matrix of q = (w, x, y, z).
 Eigen::Matrix3d rotation_bilinear(const Eigen::Vector4d& a, const Eigen::Vector4d& b) {
   auto sym = [&](int i, int j) { return 0.5 * (a[i] * b[j] + a[j] * b[i]); };
@@ -118,7 +92,7 @@ SampledMotion::SampledMotion(std::vector<double> t, std::vector<Eigen::Vector3d>
     values_.col(i).head<3>() = d[i];
     values_.col(i).tail<4>() = q_wxyz[i];
   }
-  second_ = spline_second_derivatives(t_, values_);
+  slopes_ = cubic_spline_slopes(t_, values_, SplineEnds::kNatural);
 }
 
 RigidPose SampledMotion::at(double t) const {
@@ -129,13 +103,15 @@ RigidPose SampledMotion::at(double t) const {
   const int i =
       std::clamp(static_cast<int>(std::upper_bound(t_.begin(), t_.end(), tc) - t_.begin()) - 1, 0,
                  static_cast<int>(t_.size()) - 2);
-  const double h = t_[i + 1] - t_[i], a = (t_[i + 1] - tc) / h, b = (tc - t_[i]) / h;
-  const Eigen::VectorXd y0 = values_.col(i), y1 = values_.col(i + 1);
-  const Eigen::VectorXd m0 = second_.col(i), m1 = second_.col(i + 1);
-  Eigen::VectorXd v = a * y0 + b * y1 + ((a * a * a - a) * m0 + (b * b * b - b) * m1) * (h * h / 6);
-  Eigen::VectorXd v1 = (y1 - y0) / h + (-(3 * a * a - 1) * m0 + (3 * b * b - 1) * m1) * (h / 6);
-  Eigen::VectorXd v2 = a * m0 + b * m1;
-  if (held) v1.setZero(), v2.setZero();
+  const double h = t_[i + 1] - t_[i], s = (tc - t_[i]) / h;
+  Eigen::VectorXd deriv[3];
+  for (int d = 0; d < 3; ++d) {
+    const auto w = hermite_weights(s, h, d);
+    deriv[d] = w[0] * values_.col(i) + w[1] * slopes_.col(i) + w[2] * values_.col(i + 1) +
+               w[3] * slopes_.col(i + 1);
+  }
+  const Eigen::VectorXd &v = deriv[0], &v1 = deriv[1], &v2 = deriv[2];
+  if (held) deriv[1].setZero(), deriv[2].setZero();
 
   RigidPose p;
   p.d = v.head<3>();

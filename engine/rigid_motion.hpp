@@ -70,7 +70,7 @@ class SampledMotion : public RigidMotion {
  private:
   std::vector<double> t_;
   Eigen::MatrixXd values_;  // 7 × n samples (d, q)
-  Eigen::MatrixXd second_;  // spline second derivatives, 7 × n
+  Eigen::MatrixXd slopes_;  // spline slopes at the samples, 7 × n
 };
 
 }  // namespace kelvin

@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <numbers>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -288,12 +290,21 @@ TEST(Fit, MarkerNoiseGivesRmsAtTheNoiseLevelAndHonestStandardErrors) {
   ASSERT_TRUE(u.ok) << u.error;
   // Residuals at the capture frames: per coordinate, the noise level.
   EXPECT_NEAR(u.sigma / sigma, 1.0, 0.1);
-  // Φ's continuous RMS distance sees the noise through the observed track's cubic
-  // Hermite (Catmull-Rom on this uniform grid): between frames k and k+1 the track
-  // weighs x_{k−1}, x_k, x_{k+1}, x_{k+2} by −H10/2, H00 − H11/2, H01 + H10/2, H11/2,
-  // whose squares integrate over the interval to 57/70. Hence E‖r‖² = 3σ² · 57/70
-  // per marker (2σ² for a linear track).
-  EXPECT_NEAR(f.outcome.best.rms / (std::sqrt(3.0 * 57 / 70) * sigma), 1.0, 0.1);
+  // Φ's continuous RMS distance sees the noise through the observed track's spline:
+  // on this uniform grid it weighs the frames by the cardinal cubic spline L, so
+  // E r² = σ² ∫L² per coordinate (2/3 for a linear track). By Parseval, with
+  // L̂(ω) = sinc⁴(ω/2) · 3/(2 + cos ω) and Σₖ sinc⁸ folded into the symbol of the
+  // degree-7 B-spline (2416 + 2·1191 cos ω + 2·120 cos 2ω + 2 cos 3ω)/5040,
+  //   ∫L² = (1/2π) ∫_{−π}^{π} 9 B₇(ω) / (2 + cos ω)² dω = 0.8742…
+  // (the trapezoid rule converges geometrically for this periodic integrand).
+  double spline_noise = 0;
+  constexpr int kNodes = 256;
+  for (int k = 0; k < kNodes; ++k) {
+    const double w = 2 * std::numbers::pi * k / kNodes, c = std::cos(w);
+    spline_noise += 9 * (2416 + 2382 * c + 240 * std::cos(2 * w) + 2 * std::cos(3 * w)) / 5040 /
+                    ((2 + c) * (2 + c)) / kNodes;
+  }
+  EXPECT_NEAR(f.outcome.best.rms / (std::sqrt(3.0 * spline_noise) * sigma), 1.0, 0.1);
   for (int j = 0; j < 3; ++j) {
     const double z = (f.q[j] - kTrue[j]) / u.std_error[j];
     EXPECT_LT(std::abs(z), 3.0) << f.problem->map().label(j) << " fitted " << f.q[j] << " ± "
