@@ -34,8 +34,8 @@ MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
   // absorb into the damping parameters, and the C1 cubic Hermite with three-frame
   // slopes this replaced left 0.024 mm RMS between the 180 Hz frames of the bench
   // bar's 35 Hz ringing where the spline leaves 0.0057 mm (both against the exact
-  // motion): O(h⁴) against O(h³), ends included (not-a-knot, where a one-sided slope
-  // next to every gap had biased the occluded-burst fit).
+  // motion): O(h⁴) against O(h³). Not-a-knot ends keep that order next to every gap,
+  // where a first-order end slope had biased the occluded-burst fit (λ 1.5e-3 off).
   for (const auto& track : track_) {
     Eigen::Matrix3Xd& slope =
         slopes_.emplace_back(Eigen::Matrix3Xd::Constant(3, times_.size(), NAN));
