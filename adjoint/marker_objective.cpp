@@ -75,8 +75,7 @@ bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar) const {
   const auto a = track_[i].col(k), b = track_[i].col(k + 1);
   if (!a.allFinite() || !b.allFinite()) return false;
   const double h = times_[k + 1] - times_[k];
-  const auto w = hermite_weights((t - times_[k]) / h, h, 0);
-  xbar = w[0] * a + w[1] * slopes_[i].col(k) + w[2] * b + w[3] * slopes_[i].col(k + 1);
+  xbar = hermite(a, slopes_[i].col(k), b, slopes_[i].col(k + 1), (t - times_[k]) / h, h, 0);
   return true;
 }
 

@@ -29,4 +29,12 @@ Eigen::MatrixXd cubic_spline_slopes(const std::vector<double>& t,
 /// interval of length h, at the fraction s ∈ [0, 1] of it.
 std::array<double, 4> hermite_weights(double s, double h, int derivative);
 
+/// That derivative itself, for column vectors (knot values and slopes of a spline).
+template <typename Y, typename M>
+typename Y::PlainObject hermite(const Y& y0, const M& m0, const Y& y1, const M& m1, double s,
+                                double h, int derivative) {
+  const std::array<double, 4> w = hermite_weights(s, h, derivative);
+  return w[0] * y0 + w[1] * m0 + w[2] * y1 + w[3] * m1;
+}
+
 }  // namespace kelvin

@@ -104,14 +104,11 @@ RigidPose SampledMotion::at(double t) const {
       std::clamp(static_cast<int>(std::upper_bound(t_.begin(), t_.end(), tc) - t_.begin()) - 1, 0,
                  static_cast<int>(t_.size()) - 2);
   const double h = t_[i + 1] - t_[i], s = (tc - t_[i]) / h;
-  Eigen::VectorXd deriv[3];
-  for (int d = 0; d < 3; ++d) {
-    const auto w = hermite_weights(s, h, d);
-    deriv[d] = w[0] * values_.col(i) + w[1] * slopes_.col(i) + w[2] * values_.col(i + 1) +
-               w[3] * slopes_.col(i + 1);
-  }
-  const Eigen::VectorXd &v = deriv[0], &v1 = deriv[1], &v2 = deriv[2];
-  if (held) deriv[1].setZero(), deriv[2].setZero();
+  const auto y0 = values_.col(i), y1 = values_.col(i + 1);
+  const auto m0 = slopes_.col(i), m1 = slopes_.col(i + 1);
+  const Eigen::VectorXd v = hermite(y0, m0, y1, m1, s, h, 0);
+  Eigen::VectorXd v1 = hermite(y0, m0, y1, m1, s, h, 1), v2 = hermite(y0, m0, y1, m1, s, h, 2);
+  if (held) v1.setZero(), v2.setZero();
 
   RigidPose p;
   p.d = v.head<3>();

@@ -15,8 +15,7 @@ Eigen::VectorXd evaluate(const std::vector<double>& t, const Eigen::MatrixXd& y,
   size_t k = 0;
   while (k + 2 < t.size() && time > t[k + 1]) ++k;
   const double h = t[k + 1] - t[k];
-  const auto w = hermite_weights((time - t[k]) / h, h, d);
-  return w[0] * y.col(k) + w[1] * m.col(k) + w[2] * y.col(k + 1) + w[3] * m.col(k + 1);
+  return hermite(y.col(k), m.col(k), y.col(k + 1), m.col(k + 1), (time - t[k]) / h, h, d);
 }
 
 // p(t) = 1 − 2t + 3t² − 5t³ and q(t) = 4t³ + t, with derivatives.
@@ -79,8 +78,7 @@ TEST(CubicSpline, NaturalEndsAreStraightAndTheInteriorIsTwiceDifferentiable) {
   const Eigen::MatrixXd m = cubic_spline_slopes(t, y, SplineEnds::kNatural);
   auto second = [&](size_t k, double s) {
     const double h = t[k + 1] - t[k];
-    const auto w = hermite_weights(s, h, 2);
-    return w[0] * y(0, k) + w[1] * m(0, k) + w[2] * y(0, k + 1) + w[3] * m(0, k + 1);
+    return hermite(y.col(k), m.col(k), y.col(k + 1), m.col(k + 1), s, h, 2)(0);
   };
   EXPECT_NEAR(second(0, 0), 0, 1e-12);
   EXPECT_NEAR(second(t.size() - 2, 1), 0, 1e-12);
