@@ -12,6 +12,7 @@ struct Mesh {
   Eigen::Matrix<int, 4, Eigen::Dynamic> tets;  // 0-based node indices, one column per tet
   std::vector<int> region;                     // per-tet region label (0 when the source has none)
   std::string source;                          // file path or generator description, for messages
+  int reordered = 0;  // tetrahedra read in negative orientation and reordered (orient_tetrahedra)
 
   int num_nodes() const { return static_cast<int>(nodes.cols()); }
   int num_tets() const { return static_cast<int>(tets.cols()); }
@@ -31,6 +32,11 @@ Mesh generate_cylinder(double radius, double length, double h, int axis = 2);
 Mesh read_mesh(const std::string& path);
 Mesh read_gmsh(const std::string& path);
 Mesh read_tetgen(const std::string& path);
+
+/// Swaps two nodes of every tetrahedron listed in negative orientation (as dolfin and
+/// other tools write them: a rest mesh has node orderings, not inverted elements) and
+/// counts them in mesh.reordered. Degenerate tetrahedra are left for validate_mesh.
+void orient_tetrahedra(Mesh& mesh);
 
 /// Throws kelvin::Error naming the first offending element or node: inverted or
 /// degenerate tetrahedra (volume below 1e-12 of the mean), node indices out of

@@ -72,10 +72,16 @@ Mesh read_tetgen(const std::string& path) {
 Mesh read_mesh(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".msh") return read_gmsh(path);
-  if (ext == ".node" || ext == ".ele") return read_tetgen(path);
-  throw Error(path + ": unknown mesh format '" + ext +
-              "' (kelvin reads Gmsh .msh 2.2/4.1 and TetGen .node/.ele)");
+  Mesh mesh;
+  if (ext == ".msh")
+    mesh = read_gmsh(path);
+  else if (ext == ".node" || ext == ".ele")
+    mesh = read_tetgen(path);
+  else
+    throw Error(path + ": unknown mesh format '" + ext +
+                "' (kelvin reads Gmsh .msh 2.2/4.1 and TetGen .node/.ele)");
+  orient_tetrahedra(mesh);
+  return mesh;
 }
 
 }  // namespace kelvin

@@ -20,6 +20,30 @@ double tet_volume(const Mesh& m, int e) {
          6.0;
 }
 
+namespace {
+/// Volumes at or below this share of the mean magnitude count as degenerate.
+constexpr double kDegenerateVolume = 1e-12;
+
+double mean_volume(const Mesh& m) {
+  double mean = 0;
+  for (int e = 0; e < m.num_tets(); ++e) mean += std::abs(tet_volume(m, e));
+  return m.num_tets() ? mean / m.num_tets() : 0.0;
+}
+}  // namespace
+
+void orient_tetrahedra(Mesh& m) {
+  const int nn = m.num_nodes();
+  for (int e = 0; e < m.num_tets(); ++e)
+    for (int k = 0; k < 4; ++k)
+      if (m.tets(k, e) < 0 || m.tets(k, e) >= nn) return;  // validate_mesh names it
+  const double mean = mean_volume(m);
+  for (int e = 0; e < m.num_tets(); ++e)
+    if (tet_volume(m, e) < -kDegenerateVolume * mean) {
+      std::swap(m.tets(2, e), m.tets(3, e));
+      ++m.reordered;
+    }
+}
+
 void validate_mesh(const Mesh& m) {
   const int nn = m.num_nodes(), ne = m.num_tets();
   // Both numberings, because users count from 1 and meshing tools often from 0.
@@ -40,17 +64,15 @@ void validate_mesh(const Mesh& m) {
       if (m.tets(k, e) < 0 || m.tets(k, e) >= nn)
         throw Error(fmt::format("{} refers to node {}, but the mesh has {} nodes", where(e),
                                 m.tets(k, e), nn));
-  double mean = 0;
-  for (int e = 0; e < ne; ++e) mean += std::abs(tet_volume(m, e));
-  mean /= ne;
+  const double mean = mean_volume(m);
   for (int e = 0; e < ne; ++e) {
     const double v = tet_volume(m, e);
-    if (v < 0 && std::abs(v) > 1e-12 * mean)
+    if (v < 0 && std::abs(v) > kDegenerateVolume * mean)
       throw Error(
           fmt::format("{} is inverted (negative volume {:.4g} m³): its nodes must be "
                       "ordered with positive orientation",
                       where(e), v));
-    if (std::abs(v) <= 1e-12 * mean)
+    if (std::abs(v) <= kDegenerateVolume * mean)
       throw Error(
           fmt::format("{} is degenerate (volume {:.4g} m³, below 1e-12 of the mean {:.4g} m³)",
                       where(e), v, mean));

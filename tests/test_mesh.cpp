@@ -214,6 +214,22 @@ TEST(ReadMesh, UnknownExtensionAndMissingFile) {
   EXPECT_NE(msg.find("does_not_exist.msh"), std::string::npos) << msg;
 }
 
+// dolfin (and other tools) list some tetrahedra in negative orientation; the reader
+// reorders their nodes and counts them, and the mesh is then the same solid.
+TEST(ReadGmsh, NegativelyOrderedTetrahedraAreReorderedAndCounted) {
+  const Mesh ref = kelvin::read_mesh(kMeshes + "cube_v22.msh");
+  const Mesh m = kelvin::read_mesh(kMeshes + "cube_dolfin_v22.msh");
+  EXPECT_EQ(ref.reordered, 0);
+  EXPECT_EQ(m.reordered, 3);  // elements 4, 6 and 8 of the file have two nodes swapped
+  ASSERT_EQ(m.num_tets(), ref.num_tets());
+  EXPECT_GT(min_volume(m), 0);
+  EXPECT_NEAR(total_volume(m), 1.0, 1e-14);
+  for (int e = 0; e < m.num_tets(); ++e)
+    EXPECT_NEAR(kelvin::tet_volume(m, e), kelvin::tet_volume(ref, e), 1e-15) << e;
+  EXPECT_EQ(m.region, ref.region);
+  EXPECT_NO_THROW(kelvin::validate_mesh(m));
+}
+
 TEST(ValidateMesh, InvertedTetIsNamed) {
   Mesh m = unit_cube();
   m.source = "cube";
