@@ -95,6 +95,16 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
   iopt.rtol *= o.tolerance_scale;
   iopt.atol *= o.tolerance_scale;
   initial_state(ex.scenario(), model, x0, v0);
+  if (iopt.max_order <= 0) iopt.max_order = ex.order_cap(iopt, t_end, x0, v0, o.tolerance_scale);
+}
+
+int Experiment::order_cap(const IntegratorOptions& options, double t_end, const Eigen::VectorXd& x0,
+                          const Eigen::VectorXd& v0, double tolerance_scale) {
+  if (order_choice_.max_order == 0 || order_scale_ != tolerance_scale) {
+    order_choice_ = choose_max_order(*model_, options, 0.0, t_end, x0, v0);
+    order_scale_ = tolerance_scale;
+  }
+  return order_choice_.max_order;
 }
 
 bool Experiment::plan_segments(long steps, long budget, double duration, double tolerance_scale) {

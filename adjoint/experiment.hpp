@@ -14,6 +14,7 @@
 #include "adjoint/parameter_map.hpp"
 #include "engine/fem_model.hpp"
 #include "engine/idas_integrator.hpp"
+#include "engine/order_policy.hpp"
 #include "engine/param_derivatives.hpp"
 #include "yaml/scenario.hpp"
 
@@ -110,6 +111,14 @@ class Experiment {
   long planned_steps() const { return planned_steps_; }
   void note_steps(long steps) { planned_steps_ = std::max(planned_steps_, steps); }
 
+  /// The BDF order cap for `solver.max_order: auto` at `tolerance_scale`: probed
+  /// (choose_max_order) by the first run at each scale and kept, so that every
+  /// evaluation at one scale steps alike, as the segment plan does.
+  int order_cap(const IntegratorOptions& options, double t_end, const Eigen::VectorXd& x0,
+                const Eigen::VectorXd& v0, double tolerance_scale);
+  /// The last probe's outcome (max_order 0 before any).
+  const OrderChoice& order_choice() const { return order_choice_; }
+
   /// Peaks of |λx| and |λv| per unit RMS misfit met by an adjoint pass (0 before
   /// one), renewed when a pass meets λ they mispredict. λ is linear in the misfit, so
   /// later passes set their absolute tolerances from these
@@ -127,6 +136,8 @@ class Experiment {
   double segment_ = -1;       // automatic segment length; < 0 until planned
   double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
   long planned_steps_ = 0;
+  OrderChoice order_choice_{0};
+  double order_scale_ = 0;  // the tolerance scale order_choice_ was probed at
   AdjointPeaks adjoint_peaks_;
 };
 

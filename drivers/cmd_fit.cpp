@@ -55,6 +55,7 @@ int run(const FitArgs& args) {
   FitOptions options;
   try {
     scenario = load_scenario(args.scenario);
+    print_notes(scenario);
     if (!scenario.fit.present)
       fmt::print("note: {} has no fit section; fitting every material parameter, global\n",
                  scenario.path);

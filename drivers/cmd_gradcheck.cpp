@@ -55,6 +55,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
     std::unique_ptr<FitProblem> problem;
     try {
       scenario = load_scenario(args->scenario);
+      print_notes(scenario);
       if (args->end > 0) scenario.time.end = std::min(scenario.time.end, args->end);
       scenario.solver.rtol = args->rtol;
       scenario.solver.atol = args->atol;

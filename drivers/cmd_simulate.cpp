@@ -30,6 +30,7 @@ void register_simulate(CLI::App& app, int& exit_code) {
     Scenario scenario;
     try {
       scenario = load_scenario(args->scenario);
+      print_notes(scenario);
       if (args->end > 0) {
         scenario.time.end = args->end;
         for (const auto& c : scenario.clamps)

@@ -36,6 +36,7 @@ struct IdasIntegrator::Impl {
   SUNLinearSolver LS = nullptr;
   double t_solver = 0;  // internal time of IDAS
   bool checkpointing = false;
+  bool order_set = false;  // IDASetMaxOrd is called by the first advance_to
 
   // optional quadratures and forward sensitivities
   QuadratureRhs quad_rhs;
@@ -277,7 +278,6 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   if (!m.J || !m.LS) throw Error("could not create the IDAS linear solver");
   check(IDASetLinearSolver(m.mem, m.LS, m.J), "IDASetLinearSolver");
   check(IDASetJacFn(m.mem, jacobian_fn), "IDASetJacFn");
-  check(IDASetMaxOrd(m.mem, m.opt.max_order), "IDASetMaxOrd");
   check(IDASetMaxNumSteps(m.mem, m.opt.max_steps), "IDASetMaxNumSteps");
   if (m.opt.max_step > 0) check(IDASetMaxStep(m.mem, m.opt.max_step), "IDASetMaxStep");
   if (m.opt.initial_step > 0) check(IDASetInitStep(m.mem, m.opt.initial_step), "IDASetInitStep");
@@ -379,6 +379,13 @@ bool IdasIntegrator::advance_to(double tout, double t_stop, long step_budget) {
   Impl& m = *impl_;
   const int n = m.n;
   check(IDASetStopTime(m.mem, t_stop), "IDASetStopTime");
+  if (!m.order_set) {
+    // Not before the quadratures are added: IDAQuadInit sizes its history to the
+    // maximum order at that call, and IDAS 6's adjoint checkpoints copy kk + 2
+    // quadrature history vectors whatever it is (past the end below order 4).
+    check(IDASetMaxOrd(m.mem, m.opt.max_order), "IDASetMaxOrd");
+    m.order_set = true;
+  }
   error_.clear();
   // One step at a time, so that the order of every step can be counted.
   while (m.t_solver < tout) {

@@ -18,7 +18,7 @@ struct IntegratorOptions {
   double rtol = 1e-6;
   double atol = 1e-9;                // positions (m)
   double velocity_atol_scale = 100;  // velocities use atol × this (m/s)
-  int max_order = 5;
+  int max_order = 5;                 // 1 … 5 (choose_max_order picks one for `auto`)
   long max_steps = 1000000;
   double max_step = 0;      // 0 = unlimited
   double initial_step = 0;  // 0 = IDAS's choice

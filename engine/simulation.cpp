@@ -99,7 +99,8 @@ std::string SimulationResult::summary() const {
           ? fmt::format("static initial state: {} Newton iterations in {} load steps; ",
                         static_result.iterations, static_result.load_steps)
           : "";
-  return statics +
+  const std::string order_note = order ? order->summary() + "; " : "";
+  return statics + order_note +
          fmt::format(
              "{} t = {:.6g} s in {:.3g} s wall: {} steps (mean order {:.2f};{}), {} residuals, "
              "{} Jacobians, {} factorizations, {} linear solves, {} error-test and {} convergence "
@@ -135,7 +136,12 @@ SimulationResult run_simulation(const Scenario& s, const SimulationOptions& opt)
   for (double t : event_times(vtu ? s.time.vtu_rate : 0, s.time.end)) events[t].second = true;
   events[s.time.end];  // always integrate to the end
 
-  IdasIntegrator integrator(*model, integrator_options(s.solver));
+  IntegratorOptions iopt = integrator_options(s.solver);
+  if (iopt.max_order <= 0) {
+    result.order = choose_max_order(*model, iopt, 0.0, s.time.end, x0, v0);
+    iopt.max_order = result.order->max_order;
+  }
+  IdasIntegrator integrator(*model, iopt);
   integrator.initialize(0.0, x0, v0);
 
   Eigen::Matrix3Xd x, v;

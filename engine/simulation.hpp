@@ -5,10 +5,12 @@
 /// Outputs already written survive a solver failure or an interrupt.
 #include <atomic>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "engine/fem_model.hpp"
 #include "engine/idas_integrator.hpp"
+#include "engine/order_policy.hpp"
 #include "engine/static_solver.hpp"
 #include "yaml/scenario.hpp"
 
@@ -17,6 +19,8 @@ namespace kelvin {
 /// The FEM model a scenario describes (the scenario must outlive it).
 std::unique_ptr<FemModel> build_model(const Scenario& scenario);
 
+/// The scenario's solver settings; max_order 0 (auto) is left for the caller to
+/// resolve with choose_max_order.
 IntegratorOptions integrator_options(const SolverSpec& solver);
 
 /// Initial free-dof positions and velocities: rest, or static equilibrium at t = 0.
@@ -31,6 +35,7 @@ struct SimulationResult {
   std::string error;
   IntegratorStats stats;
   StaticResult static_result;
+  std::optional<OrderChoice> order;  // when solver.max_order is auto
   double wall_seconds = 0;
   int marker_frames = 0, vtu_frames = 0;
   std::string summary() const;  // one line for people

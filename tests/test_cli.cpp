@@ -72,6 +72,17 @@ TEST(Cli, CantileverExampleRunsAndSags) {
   EXPECT_TRUE(has_pvd);
 }
 
+TEST(Cli, NegativelyOrderedTetrahedraAreReorderedWithOneNote) {
+  const fs::path out = scratch("dolfin");
+  const CliRun r = run_kelvin("simulate " + kData + "dolfin-mesh.yaml -q -o " + out.string());
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  const std::string note = "3 of the 6 tetrahedra were listed in negative orientation";
+  const auto at = r.out.find(note);
+  ASSERT_NE(at, std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find(note, at + 1), std::string::npos) << "said more than once:\n" << r.out;
+  EXPECT_NE(r.out.find("cube_dolfin_v22.msh"), std::string::npos) << r.out;
+}
+
 TEST(Cli, StepLimitStopsWithTimeReachedAndKeepsFrames) {
   const fs::path out = scratch("steplimit");
   const CliRun r = run_kelvin("simulate " + kData + "step-limit.yaml -q -o " + out.string());

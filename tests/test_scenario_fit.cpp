@@ -436,13 +436,16 @@ TEST_F(FitSection, NegativeTolerances) {
                  {"fit.max_seconds", "must not be negative"});
 }
 
-// The base scenario integrates at the default rtol 1e-6: the fit's first stage runs
-// at 1e-4 by default, at fit.start_rtol when given, and never looser than 1e-3.
+// A scenario integrating at rtol 1e-6: the fit's first stage runs at 1e-4 by
+// default, at fit.start_rtol when given, and never looser than 1e-3.
 TEST_F(FitSection, StartRtolSetsTheFirstStage) {
-  EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(load(kOneParam)), 100);
-  EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(load(kOneParam + "  start_rtol: 1.0e-5\n")), 10);
-  EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(load(kOneParam + "  start_rtol: 1.0e-6\n")), 1);
-  Scenario loose = load(kOneParam);
+  auto at_1e6 = [this](const std::string& body) {
+    return load_scenario(write("fit.yaml", base() + "solver: { rtol: 1.0e-6 }\nfit:\n" + body));
+  };
+  EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(at_1e6(kOneParam)), 100);
+  EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(at_1e6(kOneParam + "  start_rtol: 1.0e-5\n")), 10);
+  EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(at_1e6(kOneParam + "  start_rtol: 1.0e-6\n")), 1);
+  Scenario loose = at_1e6(kOneParam);
   loose.solver.rtol = 1e-4;
   EXPECT_DOUBLE_EQ(fit_start_tolerance_scale(loose), 10);
   loose.solver.rtol = 1e-2;
@@ -450,8 +453,8 @@ TEST_F(FitSection, StartRtolSetsTheFirstStage) {
 }
 
 TEST_F(FitSection, StartRtolOutsideItsRange) {
-  expect_refused(kOneParam + "  start_rtol: 1.0e-7\n", 10,
-                 {"fit.start_rtol", "[solver.rtol, 1)", "1e-06"});
+  expect_refused(kOneParam + "  start_rtol: 1.0e-5\n", 10,
+                 {"fit.start_rtol", "[solver.rtol, 1)", "0.0001"});
   expect_refused(kOneParam + "  start_rtol: 1\n", 10, {"fit.start_rtol", "[solver.rtol, 1)"});
 }
 

@@ -36,18 +36,19 @@ SolverSpec load_solver(const Doc& d, const Node& n) {
   if (n["rtol"]) {
     s.rtol = d.positive(n["rtol"], "solver.rtol", "");
     if (s.rtol >= 1)
-      d.fail(n["rtol"], "solver.rtol",
-             fmt::format("is a relative tolerance and must be below 1 (got {:g}; typical 1e-6)",
-                         s.rtol));
+      d.fail(
+          n["rtol"], "solver.rtol",
+          fmt::format("is a relative tolerance and must be below 1 (got {:g}; the default is 1e-4)",
+                      s.rtol));
   }
   if (n["atol"]) s.atol = d.positive(n["atol"], "solver.atol", "m");
   if (n["velocity_atol_scale"])
     s.velocity_atol_scale = d.positive(n["velocity_atol_scale"], "solver.velocity_atol_scale", "");
-  if (n["max_order"]) {
+  if (n["max_order"] && !(n["max_order"].IsScalar() && n["max_order"].Scalar() == "auto")) {
     const long q = d.integer(n["max_order"], "solver.max_order");
     if (q < 1 || q > 5)
       d.fail(n["max_order"], "solver.max_order",
-             fmt::format("must be between 1 and 5, the orders IDAS offers (got {})", q));
+             fmt::format("must be 'auto' or between 1 and 5, the orders IDAS offers (got {})", q));
     s.max_order = static_cast<int>(q);
   }
   if (n["max_steps"]) {
@@ -89,6 +90,11 @@ Scenario load_scenario(const std::string& path) {
   s.material = scenario_detail::load_material(d, d.required(root, "", "material"));
 
   s.mesh = scenario_detail::load_mesh(d, d.required(root, "", "mesh"));
+  if (s.mesh.reordered > 0)
+    s.notes.push_back(fmt::format(
+        "{}: {} of the {} tetrahedra were listed in negative orientation (as dolfin and some "
+        "other tools write them) and were reordered",
+        s.mesh.source, s.mesh.reordered, s.mesh.num_tets()));
   if (root["clamps"] && !root["clamps"].IsNull())
     s.clamps = scenario_detail::load_clamps(d, root["clamps"], s.mesh, s.time);
   if (root["loads"] && !root["loads"].IsNull())
