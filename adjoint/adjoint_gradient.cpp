@@ -40,6 +40,7 @@ struct Backward {
   double cached_t = NAN;
   Eigen::VectorXd cached_y, gx;
   mutable Eigen::VectorXd kt, dt;  // Kᵀλv, Dᵀλv
+  mutable ElementSlots slots;      // transpose_multiply's workspace
   Experiment::AdjointPeaks peak;   // of |λx|, |λv| at the steps taken
   Eigen::Matrix3Xd x, v;
   std::string fatal;
@@ -69,7 +70,7 @@ struct Backward {
 
   /// rB = [λx' − Kᵀλv + g_x ; M λv' + λx − Dᵀλv].
   void residual(const double* l, const double* lp, double* r) const {
-    run.model.transpose_multiply(dae.tangents(), l + n, kt.data(), dt.data());
+    run.model.transpose_multiply(dae.tangents(), l + n, kt.data(), dt.data(), slots);
     for (int c = 0; c < n; ++c) {
       r[c] = lp[c] - kt[c] + gx[c];
       r[n + c] = l[c] - dt[c];

@@ -33,7 +33,7 @@ bool DaeSystem::element_tangents(double t, const double* y, bool param_derivativ
 }
 
 void DaeSystem::assemble_from_tangents() {
-  model_.assemble_tangents(tangents_, out_.K, out_.D);
+  model_.assemble_tangents(tangents_, out_.K, out_.D, out_.slots);
 }
 
 bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {

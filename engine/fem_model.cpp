@@ -4,11 +4,48 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <exception>
 #include <limits>
 
 #include "engine/error.hpp"
+#include "engine/threads.hpp"
 
 namespace kelvin {
+namespace {
+
+/// Below this many elements or entries a loop runs on one thread: the fork and
+/// join of a parallel region (a few µs) would cost more than the work.
+constexpr int kParallelMin = 256;
+
+/// body(i) for i < count, split over the threads in fixed chunks.
+template <class Body>
+void parallel_for(int count, Body body) {
+#pragma omp parallel for schedule(static) if (count >= kParallelMin)
+  for (int i = 0; i < count; ++i) body(i);
+}
+
+/// The clamps' poses at one time, without allocating for up to four clamps (the
+/// residual needs them at every evaluation).
+class PosesAt {
+ public:
+  PosesAt(const std::vector<ClampBinding>& clamps, double t) {
+    for (size_t c = 0; c < clamps.size(); ++c)
+      if (c < kInline)
+        inline_[c] = clamps[c].motion->at(t);
+      else
+        more_.push_back(clamps[c].motion->at(t));
+  }
+  const RigidPose& operator[](int c) const {
+    return c < static_cast<int>(kInline) ? inline_[c] : more_[c - kInline];
+  }
+
+ private:
+  static constexpr size_t kInline = 4;
+  RigidPose inline_[kInline];
+  std::vector<RigidPose> more_;
+};
+
+}  // namespace
 
 Eigen::SparseMatrix<double> to_sparse_matrix(const SparsePattern& pattern,
                                              const std::vector<double>& values) {
@@ -145,6 +182,74 @@ void FemModel::build_pattern() {
         if (r >= 0) scatter_[static_cast<size_t>(e) * 144 + 12 * b + a] = pattern_.find(r, c);
       }
     }
+  build_gather_plan();
+}
+
+void FemModel::build_gather_plan() {
+  const int ne = mesh_.num_tets();
+  // Counting sort by target, visiting elements in ascending order, so each target's
+  // sources are in ascending element order.
+  auto plan = [ne](int targets, int per_element, auto target_of, std::vector<int>& ptr,
+                   std::vector<int>& src) {
+    ptr.assign(targets + 1, 0);
+    for (int e = 0; e < ne; ++e)
+      for (int k = 0; k < per_element; ++k)
+        if (const int t = target_of(e, k); t >= 0) ++ptr[t + 1];
+    for (int t = 0; t < targets; ++t) ptr[t + 1] += ptr[t];
+    src.resize(ptr[targets]);
+    std::vector<int> next(ptr.begin(), ptr.end() - 1);
+    for (int e = 0; e < ne; ++e)
+      for (int k = 0; k < per_element; ++k)
+        if (const int t = target_of(e, k); t >= 0) src[next[t]++] = per_element * e + k;
+  };
+  plan(
+      n_, 12, [this](int e, int k) { return dof(elements_[e].nodes[k / 3], k % 3); }, dof_ptr_,
+      dof_src_);
+  plan(
+      pattern_.nnz(), 144,
+      [this](int e, int k) { return scatter_[144 * static_cast<size_t>(e) + k]; }, entry_ptr_,
+      entry_src_);
+}
+
+void FemModel::gather(const std::vector<int>& ptr, const std::vector<int>& src, const double* slots,
+                      double* out) const {
+  parallel_for(static_cast<int>(ptr.size()) - 1, [&](int t) {
+    double sum = 0;
+    for (int k = ptr[t]; k < ptr[t + 1]; ++k) sum += slots[src[k]];
+    out[t] = sum;
+  });
+}
+
+template <class Body>
+std::pair<int, double> FemModel::for_each_element(const Eigen::Matrix3Xd& x,
+                                                  const Eigen::Matrix3Xd& v, unsigned request,
+                                                  std::vector<ElementResponse>& scratch,
+                                                  Body body) const {
+  const int ne = mesh_.num_tets();
+  if (static_cast<int>(scratch.size()) < thread_count()) scratch.resize(thread_count());
+  int failed = ne, thrown_at = ne;
+  std::exception_ptr thrown;  // exceptions must not leave a parallel region
+#pragma omp parallel for schedule(static) reduction(min : failed) if (ne >= kParallelMin)
+  for (int e = 0; e < ne; ++e) {
+    ElementResponse& er = scratch[thread_index()];
+    try {
+      if (evaluate_element(e, x, v, request, er))
+        body(e, er);
+      else
+        failed = std::min(failed, e);
+    } catch (...) {
+#pragma omp critical(kelvin_element_exception)
+      if (e < thrown_at) {
+        thrown_at = e;
+        thrown = std::current_exception();
+      }
+    }
+  }
+  if (thrown && thrown_at <= failed) std::rethrow_exception(thrown);
+  if (failed == ne) return {-1, 0.0};
+  ElementResponse& er = scratch[0];
+  evaluate_element(failed, x, v, request, er);  // again, for its det F
+  return {failed, er.det_F};
 }
 
 void FemModel::build_mass() {
@@ -176,6 +281,8 @@ void FemModel::build_mass() {
       const int d = dof(a, i);
       if (d >= 0) mass_[pattern_.find(d, d)] += attached_mass_[a];
     }
+  mass_diagonal_.resize(n_);
+  for (int d = 0; d < n_; ++d) mass_diagonal_[d] = mass_[pattern_.find(d, d)];
   f_external_.setZero(n_);
   for (int a = 0; a < nn; ++a)
     for (int i = 0; i < 3; ++i)
@@ -205,10 +312,8 @@ void FemModel::expand(double t, const double* x_free, const double* v_free, Eige
   const int nn = mesh_.num_nodes();
   x.resize(3, nn);
   v.resize(3, nn);
-  std::vector<RigidPose> poses;
-  poses.reserve(clamps_.size());
-  for (const auto& c : clamps_) poses.push_back(c.motion->at(t));
-  for (int a = 0; a < nn; ++a) {
+  const PosesAt poses(clamps_, t);
+  parallel_for(nn, [&](int a) {
     const int c = clamp_of_node_[a];
     if (c >= 0) {
       const Eigen::Vector3d X = mesh_.nodes.col(a);
@@ -220,15 +325,13 @@ void FemModel::expand(double t, const double* x_free, const double* v_free, Eige
         v(i, a) = v_free ? v_free[dof(a, i)] : 0.0;
       }
     }
-  }
+  });
 }
 
 void FemModel::expand_acceleration(double t, const double* a_free, Eigen::Matrix3Xd& a) const {
   const int nn = mesh_.num_nodes();
   a.resize(3, nn);
-  std::vector<RigidPose> poses;
-  poses.reserve(clamps_.size());
-  for (const auto& c : clamps_) poses.push_back(c.motion->at(t));
+  const PosesAt poses(clamps_, t);
   for (int node = 0; node < nn; ++node) {
     const int c = clamp_of_node_[node];
     if (c >= 0)
@@ -247,8 +350,7 @@ void FemModel::restrict(const Eigen::Matrix3Xd& full, double* free) const {
 void FemModel::clamp_inertia(double t, Eigen::VectorXd& out) const {
   out.setZero(n_);
   if (clamp_coupled_elements_.empty()) return;
-  std::vector<RigidPose> poses;
-  for (const auto& c : clamps_) poses.push_back(c.motion->at(t));
+  const PosesAt poses(clamps_, t);
   for (int e : clamp_coupled_elements_) {
     const auto& el = elements_[e];
     const double m = density_[e] * el.volume / 20;
@@ -264,9 +366,17 @@ void FemModel::clamp_inertia(double t, Eigen::VectorXd& out) const {
 }
 
 void FemModel::mass_multiply(const double* x, double* y) const {
-  for (int c = 0; c < n_; ++c)
-    for (int k = pattern_.colptr[c]; k < pattern_.colptr[c + 1]; ++k)
-      y[pattern_.rowind[k]] += mass_[k] * x[c];
+  if (lumped_) {
+    parallel_for(n_, [&](int d) { y[d] += mass_diagonal_[d] * x[d]; });
+    return;
+  }
+  // M is symmetric: row d of M x is column d of M against x, a gather per dof.
+  parallel_for(n_, [&](int d) {
+    double sum = 0;
+    for (int k = pattern_.colptr[d]; k < pattern_.colptr[d + 1]; ++k)
+      sum += mass_[k] * x[pattern_.rowind[k]];
+    y[d] += sum;
+  });
 }
 
 bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
@@ -319,61 +429,63 @@ bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::M
 bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                         const AssemblyRequest& req, AssemblyOutput& out) const {
   const int ne = mesh_.num_tets();
-  if (req.force) out.force.setZero(n_);
-  if (req.stiffness) out.K.assign(pattern_.nnz(), 0.0);
-  if (req.damping) out.D.assign(pattern_.nnz(), 0.0);
-  if (req.energy) out.cell_energy.setZero(ne);
+  ElementSlots& slots = out.slots;
+  if (req.force) slots.vector_a.resize(12 * static_cast<size_t>(ne));
+  if (req.stiffness) slots.matrix_a.resize(144 * static_cast<size_t>(ne));
+  if (req.damping) slots.matrix_b.resize(144 * static_cast<size_t>(ne));
+  if (req.energy) out.cell_energy.resize(ne);
   out.energy = 0;
-  out.failed_element = -1;
 
   unsigned request = kStress;
   if (req.stiffness) request |= kTangent;
   if (req.damping) request |= kRateTangent;
   if (req.energy) request |= kEnergy;
 
-  ElementResponse er;
-  Eigen::Matrix<double, 12, 12> Ke, De, Me;
-  for (int e = 0; e < ne; ++e) {
-    const auto& el = elements_[e];
-    if (!evaluate_element(e, x, v, request, er)) {
-      out.failed_element = e;
-      out.failed_det = er.det_F;
-      return false;
-    }
-    if (req.energy) {
-      out.cell_energy[e] = er.energy;
-      out.energy += el.volume * er.energy;
-    }
-    if (er.mass_damping != 0) Me = element_mass(e);
-    if (req.force) {
-      Eigen::Matrix<double, 3, 4> fe = el.volume * er.P * el.G;
-      if (er.mass_damping != 0) {
-        Eigen::Matrix<double, 3, 4> ve;
-        for (int a = 0; a < 4; ++a) ve.col(a) = v.col(el.nodes[a]);
-        Eigen::Matrix<double, 12, 1> fm = er.mass_damping * Me * ve.reshaped();
-        fe += fm.reshaped(3, 4);
-      }
-      for (int a = 0; a < 4; ++a)
-        for (int i = 0; i < 3; ++i) {
-          const int d = dof(el.nodes[a], i);
-          if (d >= 0) out.force[d] += fe(i, a);
+  const auto [failed, det] =
+      for_each_element(x, v, request, slots.scratch, [&](int e, const ElementResponse& er) {
+        const auto& el = elements_[e];
+        if (req.energy) out.cell_energy[e] = er.energy;
+        if (req.force) {
+          Eigen::Map<Eigen::Matrix<double, 3, 4>> fe(&slots.vector_a[12 * static_cast<size_t>(e)]);
+          fe = el.volume * er.P * el.G;
+          if (er.mass_damping != 0) {
+            Eigen::Matrix<double, 3, 4> ve;
+            for (int a = 0; a < 4; ++a) ve.col(a) = v.col(el.nodes[a]);
+            const Eigen::Matrix<double, 12, 1> fm =
+                er.mass_damping * element_mass(e) * ve.reshaped();
+            fe += fm.reshaped(3, 4);
+          }
         }
-    }
-    const int* sc = &scatter_[static_cast<size_t>(e) * 144];
-    if (req.stiffness) {
-      Ke.setZero();
-      accumulate_element_matrix(el, er.dPdF, 1.0, Ke);
-      for (int k = 0; k < 144; ++k)
-        if (sc[k] >= 0) out.K[sc[k]] += Ke(k % 12, k / 12);
-    }
-    if (req.damping) {
-      De.setZero();
-      accumulate_element_matrix(el, er.dPdFdot, 1.0, De);
-      if (er.mass_damping != 0) De += er.mass_damping * Me;
-      for (int k = 0; k < 144; ++k)
-        if (sc[k] >= 0) out.D[sc[k]] += De(k % 12, k / 12);
-    }
+        Eigen::Matrix<double, 12, 12> Ke;
+        if (req.stiffness) {
+          Ke.setZero();
+          accumulate_element_matrix(el, er.dPdF, 1.0, Ke);
+          std::copy(Ke.data(), Ke.data() + 144, &slots.matrix_a[144 * static_cast<size_t>(e)]);
+        }
+        if (req.damping) {
+          Ke.setZero();
+          accumulate_element_matrix(el, er.dPdFdot, 1.0, Ke);
+          if (er.mass_damping != 0) Ke += er.mass_damping * element_mass(e);
+          std::copy(Ke.data(), Ke.data() + 144, &slots.matrix_b[144 * static_cast<size_t>(e)]);
+        }
+      });
+  out.failed_element = failed;
+  out.failed_det = det;
+  if (failed >= 0) return false;
+  if (req.force) {
+    out.force.resize(n_);
+    gather(dof_ptr_, dof_src_, slots.vector_a.data(), out.force.data());
   }
+  if (req.stiffness) {
+    out.K.resize(pattern_.nnz());
+    gather(entry_ptr_, entry_src_, slots.matrix_a.data(), out.K.data());
+  }
+  if (req.damping) {
+    out.D.resize(pattern_.nnz());
+    gather(entry_ptr_, entry_src_, slots.matrix_b.data(), out.D.data());
+  }
+  if (req.energy)
+    for (int e = 0; e < ne; ++e) out.energy += elements_[e].volume * out.cell_energy[e];
   return true;
 }
 
@@ -383,73 +495,69 @@ bool FemModel::element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
   out.dPdF.resize(ne);
   out.dPdFdot.resize(ne);
   out.mass_damping.resize(ne);
-  out.failed_element = -1;
-  ElementResponse er;
+  out.dPdq.resize(param_derivatives ? ne : 0);
   const unsigned request =
       kStress | kTangent | kRateTangent | (param_derivatives ? kParamDerivative : 0u);
-  out.dPdq.resize(param_derivatives ? ne : 0);
-  for (int e = 0; e < ne; ++e) {
-    if (!evaluate_element(e, x, v, request, er)) {
-      out.failed_element = e;
-      out.failed_det = er.det_F;
-      return false;
-    }
-    out.dPdF[e] = er.dPdF;
-    out.dPdFdot[e] = er.dPdFdot;
-    out.mass_damping[e] = er.mass_damping;
-    if (param_derivatives) out.dPdq[e] = er.dPdq;
-  }
-  return true;
+  const auto [failed, det] =
+      for_each_element(x, v, request, out.scratch, [&](int e, const ElementResponse& er) {
+        out.dPdF[e] = er.dPdF;
+        out.dPdFdot[e] = er.dPdFdot;
+        out.mass_damping[e] = er.mass_damping;
+        if (param_derivatives) out.dPdq[e] = er.dPdq;
+      });
+  out.failed_element = failed;
+  out.failed_det = det;
+  return failed < 0;
 }
 
 void FemModel::assemble_tangents(const ElementTangents& t, std::vector<double>& K,
-                                 std::vector<double>& D) const {
-  K.assign(pattern_.nnz(), 0.0);
-  D.assign(pattern_.nnz(), 0.0);
-  Eigen::Matrix<double, 12, 12> Ke, De;
-  for (int e = 0; e < mesh_.num_tets(); ++e) {
+                                 std::vector<double>& D, ElementSlots& slots) const {
+  const int ne = mesh_.num_tets();
+  slots.matrix_a.resize(144 * static_cast<size_t>(ne));
+  slots.matrix_b.resize(144 * static_cast<size_t>(ne));
+  parallel_for(ne, [&](int e) {
     const auto& el = elements_[e];
-    Ke.setZero();
-    De.setZero();
+    Eigen::Matrix<double, 12, 12> Ke = Eigen::Matrix<double, 12, 12>::Zero();
     accumulate_element_matrix(el, t.dPdF[e], 1.0, Ke);
-    accumulate_element_matrix(el, t.dPdFdot[e], 1.0, De);
-    if (t.mass_damping[e] != 0) De += t.mass_damping[e] * element_mass(e);
-    const int* sc = &scatter_[static_cast<size_t>(e) * 144];
-    for (int k = 0; k < 144; ++k)
-      if (sc[k] >= 0) {
-        K[sc[k]] += Ke(k % 12, k / 12);
-        D[sc[k]] += De(k % 12, k / 12);
-      }
-  }
+    std::copy(Ke.data(), Ke.data() + 144, &slots.matrix_a[144 * static_cast<size_t>(e)]);
+    Ke.setZero();
+    accumulate_element_matrix(el, t.dPdFdot[e], 1.0, Ke);
+    if (t.mass_damping[e] != 0) Ke += t.mass_damping[e] * element_mass(e);
+    std::copy(Ke.data(), Ke.data() + 144, &slots.matrix_b[144 * static_cast<size_t>(e)]);
+  });
+  K.resize(pattern_.nnz());
+  D.resize(pattern_.nnz());
+  gather(entry_ptr_, entry_src_, slots.matrix_a.data(), K.data());
+  gather(entry_ptr_, entry_src_, slots.matrix_b.data(), D.data());
 }
 
 void FemModel::transpose_multiply(const ElementTangents& t, const double* lambda, double* Kt,
-                                  double* Dt) const {
-  std::fill(Kt, Kt + n_, 0.0);
-  std::fill(Dt, Dt + n_, 0.0);
-  Eigen::Matrix<double, 3, 4> le;
-  for (int e = 0; e < mesh_.num_tets(); ++e) {
+                                  double* Dt, ElementSlots& slots) const {
+  const int ne = mesh_.num_tets();
+  slots.vector_a.resize(12 * static_cast<size_t>(ne));
+  slots.vector_b.resize(12 * static_cast<size_t>(ne));
+  parallel_for(ne, [&](int e) {
     const auto& el = elements_[e];
+    Eigen::Matrix<double, 3, 4> le;
     for (int a = 0; a < 4; ++a)
       for (int i = 0; i < 3; ++i) {
         const int d = dof(el.nodes[a], i);
         le(i, a) = d >= 0 ? lambda[d] : 0.0;
       }
-    Eigen::Matrix<double, 3, 4> kt, dt;
-    element_transpose_product(el, t.dPdF[e], le, kt);
-    element_transpose_product(el, t.dPdFdot[e], le, dt);
+    Eigen::Map<Eigen::Matrix<double, 3, 4>> kt(&slots.vector_a[12 * static_cast<size_t>(e)]);
+    Eigen::Map<Eigen::Matrix<double, 3, 4>> dt(&slots.vector_b[12 * static_cast<size_t>(e)]);
+    Eigen::Matrix<double, 3, 4> product;
+    element_transpose_product(el, t.dPdF[e], le, product);
+    kt = product;
+    element_transpose_product(el, t.dPdFdot[e], le, product);
+    dt = product;
     if (t.mass_damping[e] != 0) {
       const Eigen::Matrix<double, 12, 1> m = t.mass_damping[e] * element_mass(e) * le.reshaped();
       dt += m.reshaped(3, 4);
     }
-    for (int a = 0; a < 4; ++a)
-      for (int i = 0; i < 3; ++i) {
-        const int d = dof(el.nodes[a], i);
-        if (d < 0) continue;
-        Kt[d] += kt(i, a);
-        Dt[d] += dt(i, a);
-      }
-  }
+  });
+  gather(dof_ptr_, dof_src_, slots.vector_a.data(), Kt);
+  gather(dof_ptr_, dof_src_, slots.vector_b.data(), Dt);
 }
 
 double FemModel::kinetic_energy(const Eigen::Matrix3Xd& v) const {

@@ -63,22 +63,6 @@ struct SparsePattern {
 Eigen::SparseMatrix<double> to_sparse_matrix(const SparsePattern& pattern,
                                              const std::vector<double>& values);
 
-struct AssemblyRequest {
-  bool force = true;
-  bool stiffness = false;  // K values
-  bool damping = false;    // D values
-  bool energy = false;     // per-cell strain energy density and total elastic energy
-};
-
-struct AssemblyOutput {
-  Eigen::VectorXd force;        // r over free dofs
-  std::vector<double> K, D;     // values in pattern() order
-  Eigen::VectorXd cell_energy;  // Ψ per tet (energy density, J/m³)
-  double energy = 0;            // Σ V Ψ
-  int failed_element = -1;      // set when a material reported an inadmissible state
-  double failed_det = 0;        // det F of that element
-};
-
 /// The tangents of one element summed over its material terms at one state.
 struct ElementResponse {
   Mat3 P;
@@ -92,6 +76,35 @@ struct ElementResponse {
   MaterialResponse term;
 };
 
+/// Per-element results of an element loop before they are gathered into global
+/// vectors and matrices, and each thread's scratch: kept between calls so that a
+/// time step allocates nothing. Elements are evaluated in parallel (OpenMP) into
+/// their own slots; every global entry then sums its slots in ascending element
+/// order (FemModel's gather plan), so the result does not depend on the thread count.
+struct ElementSlots {
+  std::vector<double> vector_a, vector_b;  // 12 per element (local dof 3a + i)
+  std::vector<double> matrix_a, matrix_b;  // 144 per element (column-major 12 × 12)
+  std::vector<ElementResponse> scratch;    // one per thread
+};
+
+struct AssemblyRequest {
+  bool force = true;
+  bool stiffness = false;  // K values
+  bool damping = false;    // D values
+  bool energy = false;     // per-cell strain energy density and total elastic energy
+};
+
+struct AssemblyOutput {
+  Eigen::VectorXd force;        // r over free dofs
+  std::vector<double> K, D;     // values in pattern() order
+  Eigen::VectorXd cell_energy;  // Ψ per tet (energy density, J/m³)
+  double energy = 0;            // Σ V Ψ
+  int failed_element = -1;      // set when a material reported an inadmissible state
+                                // (the lowest such element)
+  double failed_det = 0;        // det F of that element
+  ElementSlots slots;           // workspace
+};
+
 /// Per-element tangents at one state, kept so that the adjoint can form Kᵀλ and
 /// Dᵀλ element by element for every residual and assemble K and D only when IDAS
 /// asks for a new Newton matrix.
@@ -103,6 +116,7 @@ struct ElementTangents {
   std::vector<std::vector<Mat9X>> dPdq;
   int failed_element = -1;
   double failed_det = 0;
+  std::vector<ElementResponse> scratch;  // one per thread (workspace)
 };
 
 class FemModel {
@@ -160,11 +174,11 @@ class FemModel {
   bool element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, ElementTangents& out,
                         bool param_derivatives = false) const;
   /// K and D values in pattern() order from element tangents.
-  void assemble_tangents(const ElementTangents& t, std::vector<double>& K,
-                         std::vector<double>& D) const;
+  void assemble_tangents(const ElementTangents& t, std::vector<double>& K, std::vector<double>& D,
+                         ElementSlots& slots) const;
   /// Kt = Kᵀλ and Dt = Dᵀλ over the free dofs, element by element.
-  void transpose_multiply(const ElementTangents& t, const double* lambda, double* Kt,
-                          double* Dt) const;
+  void transpose_multiply(const ElementTangents& t, const double* lambda, double* Kt, double* Dt,
+                          ElementSlots& slots) const;
 
   /// The element with the smallest det F at full positions x, and that det F.
   std::pair<int, double> most_compressed_element(const Eigen::Matrix3Xd& x) const;
@@ -187,7 +201,17 @@ class FemModel {
   bool evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                         unsigned request, ElementResponse& out) const;
   void build_pattern();
+  void build_gather_plan();
   void build_mass();
+  /// Sums element slots into global values: out[d] = Σ slots[src] over gather list d.
+  void gather(const std::vector<int>& ptr, const std::vector<int>& src, const double* slots,
+              double* out) const;
+  /// Evaluates elements in parallel: body(e, response) for each, with `request`;
+  /// returns the lowest failing element (−1 when none) and its det F.
+  template <class Body>
+  std::pair<int, double> for_each_element(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                                          unsigned request, std::vector<ElementResponse>& scratch,
+                                          Body body) const;
 
   const Mesh& mesh_;
   std::vector<MaterialTerm> terms_;
@@ -202,9 +226,14 @@ class FemModel {
   std::vector<int> clamp_of_node_;  // clamp index or −1
   int n_ = 0;
   SparsePattern pattern_;
-  std::vector<int> scatter_;   // per element 12×12 → pattern value index or −1
-  std::vector<double> mass_;   // pattern values
-  Eigen::VectorXd node_mass_;  // lumped nodal masses (all nodes, attached masses included)
+  std::vector<int> scatter_;  // per element 12×12 → pattern value index or −1
+  // Gather plan: for free dof d, the element vector slots (12e + k) that sum into it,
+  // dof_src_[dof_ptr_[d] … dof_ptr_[d+1]); for pattern entry p, the matrix slots
+  // (144e + k), entry_src_[entry_ptr_[p] …]; both in ascending element order.
+  std::vector<int> dof_ptr_, dof_src_, entry_ptr_, entry_src_;
+  std::vector<double> mass_;           // pattern values
+  std::vector<double> mass_diagonal_;  // per free dof
+  Eigen::VectorXd node_mass_;          // lumped nodal masses (all nodes, attached masses included)
   Eigen::VectorXd f_external_;
   std::vector<int> clamp_coupled_elements_;  // elements with free and clamped nodes
   std::vector<Mat9> rest_tangent_;           // per element, only when some term needs it
