@@ -58,6 +58,11 @@ Eigen::SparseMatrix<double> newton_matrix(DaeSystem& dae, double t, double cj,
                                                  rowind.data(), val.data());
 }
 
+/// The mass matrix over the free dofs.
+Eigen::SparseMatrix<double> mass_matrix(const FemModel& model) {
+  return to_sparse_matrix(model.pattern(), model.mass());
+}
+
 }  // namespace
 
 class JacobianTest : public ::testing::TestWithParam<bool> {};
@@ -108,14 +113,67 @@ TEST_P(JacobianTest, NewtonMatrixMatchesFiniteDifferencesOfTheResidual) {
     EXPECT_LT(best, 1e-6) << "trial " << trial;
   }
 
-  // The Schur-complement solver IDAS uses solves exactly this matrix.
+  // The Schur-complement solver IDAS uses factorises the symmetric part of
+  // S = K + c_j D + c_j² M (Cholesky): it solves exactly J with K replaced by
+  // K − skew(S), skew(S) = (S − Sᵀ)/2 (the viscous stress's dependence on F), which
+  // IDAS's Newton iteration takes as its approximate Newton matrix.
   SchurSolver schur(dae);
   ASSERT_TRUE(schur.assemble(t, cj, y.data()));
   ASSERT_TRUE(schur.factorize());
+  EXPECT_FALSE(schur.factored_by_lu());
+  const Eigen::SparseMatrix<double> S = J.bottomLeftCorner(n, n) +
+                                        cj * (J.bottomRightCorner(n, n) - cj * mass_matrix(model)) +
+                                        cj * cj * mass_matrix(model);
+  const Eigen::SparseMatrix<double> skew = 0.5 * (S - Eigen::SparseMatrix<double>(S.transpose()));
+  ASSERT_GT(skew.norm(), 1e-8 * S.norm()) << "S is symmetric here: the case tests nothing";
+  Eigen::SparseMatrix<double> J_sym = J;
+  for (int c = 0; c < n; ++c)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(skew, c); it; ++it)
+      J_sym.coeffRef(n + it.row(), c) -= it.value();
   const Eigen::VectorXd b = random(N, 1.0);
   Eigen::VectorXd x(N);
   schur.solve(b.data(), x.data());
-  EXPECT_LT((J * x - b).norm() / b.norm(), 1e-10);
+  EXPECT_LT((J_sym * x - b).norm() / b.norm(), 1e-10);
+  // The adjoint's solve, with c_B = −c_j: x₂ from sym(S) x₂ = c_B b₂ − b₁ (Sᵀ's
+  // symmetric part is S's), then x₁ = (b₁ + Kᵀ x₂) / c_B, the first row exactly.
+  schur.solve_adjoint(b.data(), x.data());
+  const Eigen::SparseMatrix<double> S_sym = S - skew;
+  const Eigen::SparseMatrix<double> Kt = J.bottomLeftCorner(n, n).transpose();
+  const Eigen::VectorXd x2 = x.tail(n), rhs2 = -cj * b.tail(n) - b.head(n);
+  EXPECT_LT((S_sym * x2 - rhs2).norm() / rhs2.norm(), 1e-10);
+  EXPECT_LT((-cj * x.head(n) - Kt * x2 - b.head(n)).norm() / b.head(n).norm(), 1e-10);
+}
+
+// Where S's symmetric part is not positive definite (here: a slender bar squeezed
+// to 60 % of its length, far past buckling, at a tiny c_j) KLU factorises S itself
+// and the solve is exactly the Newton matrix's.
+TEST(SchurSolver, AnIndefiniteNewtonMatrixFallsBackToLU) {
+  Mesh mesh = generate_box({0, 0, 0}, {0.2, 0.01, 0.01}, 0.005);
+  NodeSelection sel;
+  sel.axis = 0;
+  sel.at = 0;
+  FemModel model(mesh, materials(mesh.num_tets(), true),
+                 Eigen::VectorXd::Constant(mesh.num_tets(), 900), {0, 0, 0},
+                 {{"base", select_nodes(mesh, sel), std::make_shared<FixedMotion>()}}, true);
+  DaeSystem dae(model);
+  const int n = model.num_dofs(), N = dae.size();
+  Eigen::Matrix3Xd squeezed = mesh.nodes;
+  squeezed.row(0) *= 0.6;
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(N);
+  model.restrict(squeezed, y.data());
+  const double cj = 1e-3;
+  const Eigen::SparseMatrix<double> J = newton_matrix(dae, 0, cj, y);
+  SchurSolver schur(dae);
+  ASSERT_TRUE(schur.assemble(0, cj, y.data()));
+  ASSERT_TRUE(schur.factorize());
+  EXPECT_TRUE(schur.factored_by_lu());
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Eigen::VectorXd b(N), x(N);
+  for (auto& v : b) v = u(rng);
+  schur.solve(b.data(), x.data());
+  EXPECT_LT((J * x - b).norm() / b.norm(), 1e-8);
+  (void)n;
 }
 
 INSTANTIATE_TEST_SUITE_P(LumpedAndConsistentMass, JacobianTest, ::testing::Values(true, false));
