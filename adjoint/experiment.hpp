@@ -43,19 +43,16 @@ struct GradientOptions {
   const std::atomic<bool>* interrupt = nullptr;
 };
 
-/// Default checkpoint budget (steps) for a state of `state_size` entries: 64 MiB of
+/// Default checkpoint budget (steps) for a state of `state_size` entries: 512 MiB of
 /// Hermite points (y and y', 16 bytes per entry each), at least 200. A run that
 /// fits is one segment, integrated once; a longer one is cut into segments, each
 /// integrated twice (pass 1 keeps only the boundary states) and restarted at BDF
-/// order 1, so memory stays flat in the run's length. On the 8100-tet foam
-/// cylinder (0.05 s, 249 steps) a 16 MiB budget (92 points) cut the run into 6
-/// segments and Φ + adjoint cost 2.8–4.7× Φ alone (bench_gradient, busy machine)
-/// where one segment costs 2.2–2.3×. A cap of 1000 points, as before, cut the
-/// 120-tet benchmark bar's 2 s (5.8k steps, 25 MiB of points) into 12 segments:
-/// 2.8× Φ alone against 1.9× in one.
+/// order 1, so memory stays flat in the run's length. 64 MiB cut the diagnosis bar
+/// V01 (1512 tets, 5.9k steps for 2.2 s at rtol 1e-4) into 8 segments: Φ + adjoint
+/// cost 2.57× Φ alone, where one segment costs 2.15×.
 inline long default_checkpoint_steps(int state_size) {
   const long per_point = 16L * std::max(state_size, 1);
-  return std::max((64L << 20) / per_point, 200L);
+  return std::max((512L << 20) / per_point, 200L);
 }
 
 struct ExperimentResult {
