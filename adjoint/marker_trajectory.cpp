@@ -94,6 +94,7 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
       }
       out.sensitivities.push_back(marker_sensitivities(model, markers, sx));
     }
+    out.stats = integ->stats();
   } catch (const Error& e) {
     // As in Experiment::evaluate: inadmissible parameters fail this run only.
     out.error = e.what();

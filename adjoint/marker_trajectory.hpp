@@ -20,6 +20,7 @@ struct MarkerTrajectory {
   std::vector<Eigen::Matrix3Xd> positions;  // per time: 3 × markers
   /// Per time: (3·markers) × p.size(), row 3i+c = d x*_{i,c} / dp. Empty unless asked.
   std::vector<Eigen::MatrixXd> sensitivities;
+  IntegratorStats stats;  // of the run that made the samples
 };
 
 /// Simulates `experiment` at parameters p of `map` (applied to its model first)
