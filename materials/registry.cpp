@@ -4,7 +4,9 @@
 
 #include "engine/error.hpp"
 #include "materials/corotational.hpp"
+#include "materials/drag.hpp"
 #include "materials/fiber.hpp"
+#include "materials/fibre_term.hpp"
 #include "materials/material.hpp"
 #include "materials/mooney_rivlin.hpp"
 #include "materials/neo_hookean.hpp"
@@ -13,6 +15,7 @@
 #include "materials/rayleigh.hpp"
 #include "materials/spline_material.hpp"
 #include "materials/stable_neo_hookean.hpp"
+#include "materials/stiffening.hpp"
 #include "materials/strain_damping.hpp"
 #include "materials/stvk.hpp"
 
@@ -34,6 +37,9 @@ const std::map<std::string, Factory>& factories() {
       {"spline", [] { return std::make_unique<SplineMaterial>(); }},
       {"fiber", [] { return std::make_unique<FiberReinforced>(); }},
       {"strain-damping", [] { return std::make_unique<StrainDamping>(); }},
+      {"stiffening", [] { return std::make_unique<Stiffening>(); }},
+      {"fibre", [] { return std::make_unique<FibreTerm>(); }},
+      {"drag", [] { return std::make_unique<Drag>(); }},
   };
   return f;
 }

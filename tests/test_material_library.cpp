@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <cmath>
 #include <random>
 
 #include "materials/derivative_check.hpp"
@@ -17,12 +18,21 @@ using namespace kelvin;
 namespace {
 
 const char* const kElastic[] = {"stable-neo-hookean", "corotational", "stvk",
-                                "mooney-rivlin",      "spline",       "fiber"};
+                                "mooney-rivlin",      "spline",       "fiber",
+                                "stiffening",         "fibre"};
 
 std::vector<double> defaults(const Material& m) {
   std::vector<double> q;
   for (const auto& p : m.params()) q.push_back(p.default_value);
   return q;
+}
+
+/// Defaults, except for the extension terms, which are zero by default (nested):
+/// a stress worth testing.
+std::vector<double> test_parameters(const Material& m) {
+  if (m.name() == "stiffening") return {1e5};
+  if (m.name() == "fibre") return {5e4, 0.6, 1.1};
+  return defaults(m);
 }
 
 void expect_all_pass(const std::string& model, std::vector<double> q = {},
@@ -149,6 +159,40 @@ TEST(MaterialLibrary, FiberDerivatives) {
   expect_all_pass("fiber");
   expect_all_pass("fiber", {2e4, 5e3, 3e4, 0.5});
   expect_all_pass("fiber", {2e4, 5e3, 3e4, 0.0});  // quadratic limit
+}
+
+// The extension terms the diagnosis adds to a nominal model (nested at zero).
+TEST(MaterialLibrary, ExtensionTermDerivatives) {
+  expect_all_pass("stiffening", {1.5e5});
+  expect_all_pass("fibre", {8e4, 0.7853981633974483, 1.5707963267948966});  // a = (0, 1, 1)/√2
+  expect_all_pass("fibre", {3e4, 0.3, -2.0});
+}
+
+TEST(MaterialLibrary, ExtensionTermsHaveTheirClosedForms) {
+  std::mt19937_64 rng(11);
+  const Mat3 F = Mat3::Identity() + random_matrix(rng, 0.3);
+  const double J = F.determinant(), I1 = F.squaredNorm();
+  // Ψ = c₂ (I₁ − 3 − 2 ln J)², P = 4 c₂ (I₁ − 3 − 2 ln J)(F − F⁻ᵀ).
+  auto s = create_builtin_material("stiffening");
+  const double c2 = 1.5e5, a = I1 - 3 - 2 * std::log(J);
+  const MaterialResponse rs = eval(*s, F, {c2}, kStress | kEnergy);
+  EXPECT_NEAR(rs.energy, c2 * a * a, 1e-9 * c2);
+  EXPECT_LT(rel(rs.P, 4 * c2 * a * (F - Mat3(F.inverse().transpose()))), 1e-12);
+  // Nothing at rest, and nothing to first order in the strain.
+  EXPECT_EQ(eval(*s, Mat3::Identity(), {c2}).P.norm(), 0.0);
+  // Ψ = k/2 (|F a|² − 1)², a = (0, 1, 1)/√2 at θ = π/4, φ = π/2.
+  auto f = create_builtin_material("fibre");
+  const std::vector<double> q = {8e4, M_PI / 4, M_PI / 2};
+  const Eigen::Vector3d dir = Eigen::Vector3d(0, 1, 1).normalized();
+  const double x = (F * dir).squaredNorm() - 1;
+  const MaterialResponse rf = eval(*f, F, q, kStress | kEnergy);
+  EXPECT_NEAR(rf.energy, 0.5 * q[0] * x * x, 1e-9 * q[0]);
+  EXPECT_LT(rel(rf.P, 2 * q[0] * x * (F * dir) * dir.transpose()), 1e-12);
+  // Drag has no stress: its force is the engine's c M v.
+  auto d = create_builtin_material("drag");
+  ASSERT_TRUE(d->is_viscous());
+  EXPECT_EQ(d->mass_damping_param(), 0);
+  EXPECT_EQ(eval(*d, F, {2.0}, kStress, random_matrix(rng, 1.0)).P.norm(), 0.0);
 }
 
 TEST(MaterialLibrary, FiberDerivativesAlongAnotherDirection) {
@@ -283,7 +327,7 @@ TEST(MaterialLibrary, ObjectivityOfElasticModels) {
   std::mt19937_64 rng(13);
   for (const char* name : kElastic) {
     auto m = create_builtin_material(name);
-    const auto q = defaults(*m);
+    const auto q = test_parameters(*m);
     for (int trial = 0; trial < 4; ++trial) {
       const Mat3 F = Mat3::Identity() + random_matrix(rng, 0.3);
       const Mat3 R = rotation(rng);
