@@ -424,7 +424,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
     if (!ok) return;
     if (segments == 1) run.ex.note_steps(integ->stats().steps);
     if (k == segments - 1) {
-      result.phi_per_marker += integ->quadrature();
+      run.add_quadratures(*integ, result);
       run.set_adjoint_scale(result.phi_per_marker);
     }
     if (!backward_segment(run, *integ, T[k], T[k + 1], lambda, result.dphi_dq, seen, result))
@@ -445,6 +445,8 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       throw Error("an element is inadmissible at the static state");
   }
   result.gradient = run.map.pull_back(run.p, result.dphi_dq);
+  if (run.observation_count > 0)
+    run.map.add_observation_gradient(result.dphi_dtheta, result.gradient);
   result.ok = true;
 }
 

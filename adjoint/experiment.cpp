@@ -53,6 +53,8 @@ ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::Vect
   const auto start = std::chrono::steady_clock::now();
   ExperimentResult result;
   map.apply(p, *model_);
+  objective_.set_observation_vector(
+      map.observation_vector(p, objective_.num_observation_parameters()));
   try {
     ExperimentRun run(*this, map, p, options);
     switch (options.method) {
@@ -94,6 +96,8 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
       t_end(e.scenario().time.end) {
   iopt.rtol *= o.tolerance_scale;
   iopt.atol *= o.tolerance_scale;
+  if (o.method != GradientMethod::kNone && !m.observation_blocks().empty())
+    observation_count = objective.num_observation_parameters();
   initial_state(ex.scenario(), model, x0, v0);
   if (iopt.max_order <= 0) iopt.max_order = ex.order_cap(iopt, t_end, x0, v0, o.tolerance_scale);
 }
@@ -146,7 +150,7 @@ bool ExperimentRun::integrate_segments(
     // stepped past it): reading it threw, and the trial's error became "could not
     // interpolate the quadratures" instead of what stopped it.
     if (!ok) return false;
-    result.phi_per_marker += integ->quadrature();
+    add_quadratures(*integ, result);
     xk = integ->positions();
     vk = integ->velocities();
     first_step = integ->restart_step();
@@ -174,15 +178,27 @@ std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::Vect
   // control IDAS resolves them; the absolute tolerance is the misfit error of a
   // 1 mm residual whose marker is off by the position tolerance.
   const double atol = 1e-3 * iopt.atol * (t_end - t0);
+  const int nm = objective.num_markers();
   integ->add_quadrature(
-      objective.num_markers(),
-      [this](double tt, const double* y, const double*, double* g) {
+      nm + observation_count,
+      [this, nm](double tt, const double* y, const double*, double* g) {
         model.expand(tt, y, nullptr, x, v);
         objective.integrand(tt, model, x, g);
+        if (observation_count > 0) objective.observation_gradient(tt, model, x, g + nm);
         return true;
       },
       true, atol);
   return integ;
+}
+
+void ExperimentRun::add_quadratures(const IdasIntegrator& integ, ExperimentResult& result) const {
+  const Eigen::VectorXd q = integ.quadrature();
+  const int nm = objective.num_markers();
+  if (result.phi_per_marker.size() != nm) result.phi_per_marker.setZero(nm);
+  result.phi_per_marker += q.head(nm);
+  if (observation_count == 0) return;
+  if (result.dphi_dtheta.size() != observation_count) result.dphi_dtheta.setZero(observation_count);
+  result.dphi_dtheta += q.tail(observation_count);
 }
 
 bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& result,
@@ -231,11 +247,10 @@ bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
   B.setZero(n, map.size());
   const auto& elements = model.elements();
   return deriv.for_each(x, v, a, [&](int e, int s, const Vec12& dR) {
-    const int j = map.index(s, e);
-    if (j < 0) return;
-    const double dq = map.derivative(p, j);
-    for (int k = 0; k < 12; ++k)
-      if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0) B(d, j) += dq * dR[k];
+    map.for_each_dependency(p, s, e, [&](int j, double dq) {
+      for (int k = 0; k < 12; ++k)
+        if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0) B(d, j) += dq * dR[k];
+    });
   });
 }
 

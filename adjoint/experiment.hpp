@@ -63,6 +63,7 @@ struct ExperimentResult {
   Eigen::VectorXd phi_per_marker;  // Φᵢ
   double phi = 0, rms = 0;         // Σ Φᵢ and the RMS distance (m)
   Eigen::VectorXd gradient;        // dΦ/dp (empty without a gradient)
+  Eigen::VectorXd dphi_dtheta;     // ∫ ∂g/∂θ dt over the observation vector, with a gradient
   Eigen::MatrixXd dphi_dq;         // adjoint only: dΦ/dq per slot × element
   IntegratorStats forward_stats, backward_stats;
   long backward_steps = 0;
@@ -74,11 +75,13 @@ class Experiment {
  public:
   /// The scenario must outlive the experiment and have observed marker tracks.
   Experiment(const Scenario& scenario, const ObjectiveSpec& objective);
+  Experiment(Scenario&&, const ObjectiveSpec&) = delete;
 
   const Scenario& scenario() const { return scenario_; }
   FemModel& model() { return *model_; }
   const FemModel& model() const { return *model_; }
   const MarkerObjective& objective() const { return objective_; }
+  MarkerObjective& objective() { return objective_; }
 
   /// Φ and, on request, dΦ/dp at the map's parameters p (applied to the model
   /// first). A failing simulation (inversion, solver failure) is reported in the

@@ -30,6 +30,13 @@ struct ExperimentRun {
   Eigen::VectorXd x0, v0;
   Eigen::Matrix3Xd x, v, a;  // full nodal fields of the last expand()
 
+  /// Observation parameters whose gradient this run integrates along with Φ
+  /// (MarkerObjective's θ; 0 without a gradient or without observation blocks).
+  int observation_count = 0;
+  /// Adds a finished integrator's quadratures to `result`: Φ per marker and, with
+  /// observation_count, ∫ ∂g/∂θ dt.
+  void add_quadratures(const IdasIntegrator& integ, ExperimentResult& result) const;
+
   /// Segment boundaries t0 = T₀ < … < T_S = t_end (one segment while the
   /// experiment's automatic plan is open: that run then decides it).
   std::vector<double> boundaries() const;

@@ -12,22 +12,17 @@ namespace kelvin {
 
 std::vector<FitParameterSpec> default_fit_parameters(const Scenario& s) {
   std::vector<FitParameterSpec> out;
-  auto add_term = [&](const MaterialTermSpec& term, const std::string& prefix) {
-    const auto model = create_material(term.model, term.plugin);
-    for (const auto& info : model->params()) {
-      FitParameterSpec spec;
-      spec.target = prefix + "." + info.name;
-      spec.lower = info.lower;
-      spec.upper = info.upper;
-      spec.log = info.positive;
-      // Parameters at zero (e.g. an unused Rayleigh coefficient) cannot start a log fit.
-      const double value = term.params.at(info.name);
-      if (spec.log && !(value > 0)) continue;
-      out.push_back(spec);
-    }
-  };
-  add_term(s.material.elastic, "elastic");
-  if (s.material.viscous) add_term(*s.material.viscous, "viscous");
+  for (const MaterialQuantity& q : material_quantities(s.material)) {
+    if (q.term < 0) continue;  // the density is fitted only when asked for
+    FitParameterSpec spec;
+    spec.target = q.name;
+    spec.lower = q.info.lower;
+    spec.upper = q.info.upper;
+    spec.log = q.info.positive;
+    // Parameters at zero (e.g. an unused Rayleigh coefficient) cannot start a log fit.
+    if (spec.log && !(q.value > 0)) continue;
+    out.push_back(spec);
+  }
   return out;
 }
 
@@ -47,7 +42,8 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
           scenario.mesh.num_tets()));
     experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
   }
-  map_ = std::make_unique<ParameterMap>(specs, scenario, experiments_[0]->model());
+  map_ = std::make_unique<ParameterMap>(specs, scenario, experiments_[0]->model(),
+                                        experiments_[0]->objective().names());
   // Joint experiments share the fitted parameters, so each must have the same
   // material models; otherwise a slot would name another model's parameter (found
   // here, not as a failed simulation at the first evaluation).

@@ -33,7 +33,9 @@ class FitProblem {
  public:
   /// Loads the experiments of `scenario.fit.experiments` (paths relative to the
   /// scenario) and builds the map of `specs` (default_fit_parameters when empty).
+  /// The scenario must outlive the problem (a temporary would not).
   FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs = {});
+  FitProblem(Scenario&&, std::vector<FitParameterSpec> = {}) = delete;
 
   const ParameterMap& map() const { return *map_; }
   int num_experiments() const { return static_cast<int>(experiments_.size()); }

@@ -72,7 +72,9 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
   Eigen::VectorXd pbar(np);
   for (const auto& b : map.blocks())
     for (int j = b.offset; j < b.offset + b.count; ++j)
-      pbar[j] = b.log ? 1.0 : std::max(std::abs(p[j]), 1e-300);
+      pbar[j] = b.log || b.is_multiplier() ? 1.0 : std::max(std::abs(p[j]), 1e-300);
+  // Observations do not move the model: their sensitivities are zero whatever scale.
+  for (const auto& o : map.observation_blocks()) pbar.segment(o.offset, o.count).setOnes();
 
   auto cache = std::make_shared<StateCache>();
   auto params = std::make_shared<Eigen::MatrixXd>();
@@ -114,7 +116,7 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
     run.model.expand(t, y, nullptr, x, v);
     Eigen::VectorXd grad = Eigen::VectorXd::Zero(n);
     run.objective.add_gradient(t, run.model, x, grad.data());
-    const int nq = run.objective.num_markers();
+    const int nq = run.objective.num_markers() + run.observation_count;
     for (int j = 0; j < ns; ++j) {
       // Only the sum over markers is needed: it is carried in component 0.
       std::fill(qS[j], qS[j] + nq, 0.0);
@@ -126,8 +128,12 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
   const bool ok = run.advance(*integ, run.t_end, result);
   result.forward_stats = integ->stats();
   if (!ok) return;  // the quadrature is unreadable after a failure (integrate_segments)
-  result.phi_per_marker = integ->quadrature();
-  result.gradient = integ->quadrature_sensitivities().colwise().sum().transpose();
+  run.add_quadratures(*integ, result);
+  // Component 0 carries the sum over markers (above); the observation components'
+  // sensitivities are zero: θ does not move the model.
+  result.gradient = integ->quadrature_sensitivities().row(0).transpose();
+  if (run.observation_count > 0)
+    run.map.add_observation_gradient(result.dphi_dtheta, result.gradient);
   result.ok = true;
 }
 

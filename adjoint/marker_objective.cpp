@@ -50,6 +50,30 @@ MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
       k = end + 1;
     }
   }
+  // Each frame's seen run (first and last frame), for evaluating a shifted clock.
+  for (const auto& track : track_) {
+    std::vector<int>& first = run_first_.emplace_back(times_.size(), -1);
+    std::vector<int>& last = run_last_.emplace_back(times_.size(), -1);
+    for (size_t k = 0; k < times_.size();) {
+      size_t end = k;
+      while (end < times_.size() && track.col(end).allFinite()) ++end;
+      for (size_t j = k; j < end; ++j) {
+        first[j] = static_cast<int>(k);
+        last[j] = static_cast<int>(end) - 1;
+      }
+      k = end + 1;
+    }
+  }
+  // The registration rotates about the tracks' mean position, so that its rotation
+  // and translation are nearly independent wherever the capture frame's origin is.
+  long seen = 0;
+  for (const auto& track : track_)
+    for (int k = 0; k < track.cols(); ++k)
+      if (track.col(k).allFinite()) {
+        centroid_ += track.col(k);
+        ++seen;
+      }
+  if (seen > 0) centroid_ /= static_cast<double>(seen);
   weighted_time_.assign(names_.size(), 0.0);
   for (size_t i = 0; i < names_.size(); ++i)
     for (size_t k = 0; k + 1 < times_.size(); ++k) {
@@ -66,46 +90,156 @@ MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
         t0_, t1_));
 }
 
-bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar) const {
+namespace {
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d S;
+  S << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return S;
+}
+
+/// exp([ω]×) (Rodrigues) and the right Jacobian J_r(ω), with which
+/// ∂(R v)/∂ω = −R [v]× J_r: series near ω = 0 keep both exact to rounding.
+void rotation_and_jacobian(const Eigen::Vector3d& w, Eigen::Matrix3d& R, Eigen::Matrix3d& Jr) {
+  const double th = w.norm();
+  const Eigen::Matrix3d W = skew(w), W2 = W * W;
+  double a, b, c;  // sin θ/θ, (1 − cos θ)/θ², (θ − sin θ)/θ³
+  if (th < 1e-4) {
+    const double t2 = th * th;
+    a = 1 - t2 / 6;
+    b = 0.5 - t2 / 24;
+    c = 1.0 / 6 - t2 / 120;
+  } else {
+    a = std::sin(th) / th;
+    b = (1 - std::cos(th)) / (th * th);
+    c = (th - std::sin(th)) / (th * th * th);
+  }
+  R = Eigen::Matrix3d::Identity() + a * W + b * W2;
+  Jr = Eigen::Matrix3d::Identity() - b * W + c * W2;
+}
+
+}  // namespace
+
+void MarkerObjective::set_observation(const ObservationParams& params) {
+  obs_ = params;
+  if (obs_.marker_offsets.cols() != num_markers())
+    obs_.marker_offsets = Eigen::Matrix3Xd::Zero(3, num_markers());
+  Eigen::Matrix3d Jr;
+  rotation_and_jacobian(obs_.rotation, R_, Jr);
+}
+
+Eigen::VectorXd MarkerObjective::observation_vector() const {
+  Eigen::VectorXd theta = Eigen::VectorXd::Zero(num_observation_parameters());
+  theta[0] = obs_.clock_offset;
+  if (obs_.marker_offsets.cols() == num_markers())
+    theta.segment(1, 3 * num_markers()) = obs_.marker_offsets.reshaped();
+  theta.segment<3>(1 + 3 * num_markers()) = obs_.rotation;
+  theta.segment<3>(4 + 3 * num_markers()) = obs_.translation;
+  return theta;
+}
+
+void MarkerObjective::set_observation_vector(const Eigen::VectorXd& theta) {
+  ObservationParams p;
+  p.clock_offset = theta[0];
+  p.marker_offsets = theta.segment(1, 3 * num_markers()).reshaped(3, num_markers());
+  p.rotation = theta.segment<3>(1 + 3 * num_markers());
+  p.translation = theta.segment<3>(4 + 3 * num_markers());
+  set_observation(p);
+}
+
+bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar,
+                               Eigen::Vector3d* rate) const {
   if (t < t0_ || t > t1_ || times_.size() < 2 || t < times_.front() || t > times_.back())
     return false;
   // Left-continuous: a time equal to a frame belongs to the interval ending there.
   size_t k = std::lower_bound(times_.begin(), times_.end(), t) - times_.begin();
   k = k == 0 ? 0 : k - 1;
+  if (!track_[i].col(k).allFinite() || !track_[i].col(k + 1).allFinite()) return false;
+  // The clock offset moves where the run's spline is read, not whether the marker
+  // counts: past the run's ends its end pieces continue (smoothly, for small τ).
+  const double s = t + obs_.clock_offset;
+  if (obs_.clock_offset != 0) {
+    const int first = run_first_[i][k], last = run_last_[i][k];
+    const size_t j = std::lower_bound(times_.begin(), times_.end(), s) - times_.begin();
+    k = static_cast<size_t>(
+        std::clamp(static_cast<int>(j == 0 ? 0 : j - 1), first, std::max(first, last - 1)));
+  }
+  const double h = times_[k + 1] - times_[k], u = (s - times_[k]) / h;
   const auto a = track_[i].col(k), b = track_[i].col(k + 1);
-  if (!a.allFinite() || !b.allFinite()) return false;
-  const double h = times_[k + 1] - times_[k];
-  xbar = hermite(a, slopes_[i].col(k), b, slopes_[i].col(k + 1), (t - times_[k]) / h, h, 0);
+  const auto ma = slopes_[i].col(k), mb = slopes_[i].col(k + 1);
+  xbar = hermite(a, ma, b, mb, u, h, 0);
+  if (rate) *rate = hermite(a, ma, b, mb, u, h, 1);
+  return true;
+}
+
+Eigen::Vector4d MarkerObjective::weights(int i, const FemModel& model) const {
+  Eigen::Vector4d w = embedding_[i].weights;
+  if (obs_.marker_offsets.cols() == num_markers() && !obs_.marker_offsets.col(i).isZero()) {
+    const auto& G = model.elements()[embedding_[i].tet].G;
+    w += G.transpose() * obs_.marker_offsets.col(i);
+  }
+  return w;
+}
+
+bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                                  Eigen::Vector3d& simulated,
+                                  Eigen::Vector3d& observed_position) const {
+  Eigen::Vector3d xbar;
+  if (!observed(i, t, xbar)) return false;
+  const Eigen::Vector4d w = weights(i, model);
+  simulated.setZero();
+  for (int a = 0; a < 4; ++a) simulated += w[a] * x.col(model.mesh().tets(a, embedding_[i].tet));
+  // The nominal registration leaves the capture bit for bit as recorded.
+  observed_position = obs_.rotation.isZero() && obs_.translation.isZero()
+                          ? xbar
+                          : Eigen::Vector3d(R_ * (xbar - centroid_) + centroid_ + obs_.translation);
   return true;
 }
 
 void MarkerObjective::integrand(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                                 double* g) const {
-  Eigen::Vector3d xbar;
-  for (int i = 0; i < num_markers(); ++i) {
-    g[i] = 0;
-    if (!observed(i, t, xbar)) continue;
-    const auto& m = embedding_[i];
-    Eigen::Vector3d xs = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 4; ++a) xs += m.weights[a] * x.col(model.mesh().tets(a, m.tet));
-    g[i] = 0.5 * weight_[i] * (xs - xbar).squaredNorm();
-  }
+  Eigen::Vector3d xs, xo;
+  for (int i = 0; i < num_markers(); ++i)
+    g[i] = marker_pair(i, t, model, x, xs, xo) ? 0.5 * weight_[i] * (xs - xo).squaredNorm() : 0.0;
 }
 
 void MarkerObjective::add_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                                    double* grad) const {
-  Eigen::Vector3d xbar;
+  Eigen::Vector3d xs, xo;
   for (int i = 0; i < num_markers(); ++i) {
-    if (!observed(i, t, xbar)) continue;
-    const auto& m = embedding_[i];
-    Eigen::Vector3d xs = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 4; ++a) xs += m.weights[a] * x.col(model.mesh().tets(a, m.tet));
-    const Eigen::Vector3d r = weight_[i] * (xs - xbar);
+    if (!marker_pair(i, t, model, x, xs, xo)) continue;
+    const Eigen::Vector3d r = weight_[i] * (xs - xo);
+    const Eigen::Vector4d w = weights(i, model);
     for (int a = 0; a < 4; ++a)
       for (int c = 0; c < 3; ++c) {
-        const int d = model.dof(model.mesh().tets(a, m.tet), c);
-        if (d >= 0) grad[d] += m.weights[a] * r[c];
+        const int d = model.dof(model.mesh().tets(a, embedding_[i].tet), c);
+        if (d >= 0) grad[d] += w[a] * r[c];
       }
+  }
+}
+
+void MarkerObjective::observation_gradient(double t, const FemModel& model,
+                                           const Eigen::Matrix3Xd& x, double* out) const {
+  const int nm = num_markers();
+  Eigen::Map<Eigen::VectorXd> g(out, num_observation_parameters());
+  g.setZero();
+  Eigen::Matrix3d R, Jr;
+  rotation_and_jacobian(obs_.rotation, R, Jr);
+  Eigen::Vector3d xs, xo, xbar, rate;
+  for (int i = 0; i < nm; ++i) {
+    if (!marker_pair(i, t, model, x, xs, xo)) continue;
+    observed(i, t, xbar, &rate);
+    const Eigen::Vector3d r = weight_[i] * (xs - xo);
+    g[0] -= r.dot(R * rate);  // ∂x̄'/∂τ = R dx̄/dt
+    // ∂x*/∂δ = Σₐ xₐ ∇Nₐᵀ, the element's deformation gradient.
+    const auto& el = model.elements()[embedding_[i].tet];
+    Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
+    for (int a = 0; a < 4; ++a) F += x.col(el.nodes[a]) * el.G.col(a).transpose();
+    g.segment<3>(1 + 3 * i) += F.transpose() * r;
+    // ∂(R v)/∂ω = −R [v]× J_r, v = x̄ − c; ∂x̄'/∂d = I.
+    const Eigen::Matrix3d dRv = -R * skew(xbar - centroid_) * Jr;
+    g.segment<3>(1 + 3 * nm) -= dRv.transpose() * r;
+    g.segment<3>(4 + 3 * nm) -= r;
   }
 }
 

@@ -18,6 +18,18 @@
 
 namespace kelvin {
 
+/// How the capture relates to the model, all zero in the nominal model (each is a
+/// nested extension of the gap diagnosis): a clock offset τ (the marker clock runs
+/// ahead of the clamp's: the model at t is compared with the tracks at t + τ), an
+/// offset δᵢ of each marker's rest position (rest frame, m), and a rigid
+/// registration of the capture frame: x̄ ↦ R(ω)(x̄ − c) + c + d, R(ω) = exp([ω]×),
+/// c the mean of the captured positions.
+struct ObservationParams {
+  double clock_offset = 0;          // s
+  Eigen::Matrix3Xd marker_offsets;  // 3 × markers; empty = none
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), translation = Eigen::Vector3d::Zero();
+};
+
 class MarkerObjective {
  public:
   /// Markers without an observed track are ignored. Throws kelvin::Error when no
@@ -36,6 +48,24 @@ class MarkerObjective {
   /// ∂(Σᵢ gᵢ)/∂x over the free dofs, added to grad.
   void add_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x, double* grad) const;
 
+  /// The observation parameters in use (zero unless set).
+  const ObservationParams& observation() const { return obs_; }
+  void set_observation(const ObservationParams& params);
+  /// Entries of the observation vector θ: clock offset, 3 per marker (offsets, in
+  /// names() order), then rotation (3) and translation (3).
+  int num_observation_parameters() const { return 7 + 3 * num_markers(); }
+  /// θ as a vector and back (the layout above).
+  Eigen::VectorXd observation_vector() const;
+  void set_observation_vector(const Eigen::VectorXd& theta);
+  /// ∂(Σᵢ gᵢ)/∂θ at t, written to out (num_observation_parameters() entries). The
+  /// times a marker counts at are those of the unshifted capture, so Φ is smooth in τ.
+  void observation_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                            double* out) const;
+  /// Marker i's simulated position (its offset applied) and the observed one as the
+  /// model sees it at t; false when it does not count at t.
+  bool marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                   Eigen::Vector3d& simulated, Eigen::Vector3d& observed) const;
+
   /// ∫ wᵢ dt over marker i's observed intervals in the window: RMSᵢ = sqrt(2Φᵢ / this).
   double weighted_observed_time(int i) const { return weighted_time_[i]; }
   /// Per-marker RMS distances and the overall one, sqrt(2Φ / Σᵢ wᵢTᵢ) — for full
@@ -44,8 +74,11 @@ class MarkerObjective {
   double rms(const Eigen::VectorXd& phi_per_marker) const;
 
  private:
-  /// Observed position of marker i at t; false when unobserved there.
-  bool observed(int i, double t, Eigen::Vector3d& xbar) const;
+  /// Observed position of marker i at t in the capture's own frame and clock, and
+  /// on request its time derivative; false when unobserved there.
+  bool observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate = nullptr) const;
+  /// Barycentric weights of marker i with its offset applied.
+  Eigen::Vector4d weights(int i, const FemModel& model) const;
 
   std::vector<std::string> names_;
   std::vector<MarkerEmbedding> embedding_;
@@ -54,6 +87,10 @@ class MarkerObjective {
   std::vector<Eigen::Matrix3Xd> track_;   // per marker 3 × frames (NaN = occluded)
   std::vector<Eigen::Matrix3Xd> slopes_;  // the spline's velocity at each seen frame
   double t0_ = 0, t1_ = 0;
+  std::vector<std::vector<int>> run_first_, run_last_;  // per marker, per frame: its seen run
+  Eigen::Vector3d centroid_ = Eigen::Vector3d::Zero();  // of the captured positions
+  ObservationParams obs_;
+  Eigen::Matrix3d R_ = Eigen::Matrix3d::Identity();  // R(obs_.rotation)
 };
 
 }  // namespace kelvin

@@ -118,9 +118,9 @@ FitTiming cylinder_fit(const fs::path& dir, const Options& o) {
   const SimulationResult r = run_simulation(truth, so);
   if (!r.completed) throw Error("cylinder truth simulation failed: " + r.error);
   Scenario s = bench::observing(truth, dir.string());
-  s.material.elastic.params["lambda"] *= 2;
-  s.material.elastic.params["mu"] *= 0.5;
-  s.material.viscous->params["nu"] *= 2;
+  s.material.elastic[0].params["lambda"] *= 2;
+  s.material.elastic[0].params["mu"] *= 0.5;
+  s.material.viscous[0].params["nu"] *= 2;
   s.fit.parameters = {positive_fit_parameter("elastic.lambda"),
                       positive_fit_parameter("elastic.mu"), positive_fit_parameter("viscous.nu")};
   return time_fit(s, o.max_evaluations);

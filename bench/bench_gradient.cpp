@@ -80,9 +80,9 @@ Scenario with_observations(double h, double T, const std::string& dir, bool fork
   }
   if (!ok) throw Error("truth simulation failed");
   Scenario s = bench::observing(truth, dir);
-  s.material.elastic.params["mu"] *= 1.3;
-  s.material.elastic.params["lambda"] *= 0.7;
-  s.material.viscous->params["nu"] *= 1.3;
+  s.material.elastic[0].params["mu"] *= 1.3;
+  s.material.elastic[0].params["lambda"] *= 0.7;
+  s.material.viscous[0].params["nu"] *= 1.3;
   return s;
 }
 

@@ -350,9 +350,9 @@ Case v01_case() {
   c.name = "V01 train (yaml/examples/diagnosis/V01-none/train.yaml, λ 2×, μ 0.7×, ν 2× off)";
   c.scenario = load_scenario(KELVIN_SOURCE_DIR "/yaml/examples/diagnosis/V01-none/train.yaml");
   // Away from the fitted point, where the gradient is mostly the capture noise's.
-  c.scenario.material.elastic.params["lambda"] *= 2;
-  c.scenario.material.elastic.params["mu"] *= 0.7;
-  c.scenario.material.viscous->params["nu"] *= 2;
+  c.scenario.material.elastic[0].params["lambda"] *= 2;
+  c.scenario.material.elastic[0].params["mu"] *= 0.7;
+  c.scenario.material.viscous[0].params["nu"] *= 2;
   c.frames = frame_times(c.scenario.time.end, c.scenario.time.output_rate);
   return c;
 }

@@ -131,46 +131,46 @@ int run(const FitArgs& args) {
     if (!args.quiet) fmt::print("{}\n", line);
   };
 
-  FitSession session;
-  session.outdir = outdir;
-  session.start = state.start;
-  session.algorithm = options.algorithm;
-  session.gradient_method = to_string(options.gradient.method);
+  FitSummary summary;
+  summary.outdir = outdir;
+  summary.start = state.start;
+  summary.algorithm = options.algorithm;
+  summary.gradient_method = to_string(options.gradient.method);
   try {
     const FitOutcome out = run_fit(*problem, p0, options);
-    session.best = out.best.evaluation ? out.p : state.best;
-    session.stop_reason = out.stop_reason;
-    session.uncertainty = out.uncertainty;
-    session.interrupted = out.interrupted || g_interrupted;
-    if (!scenario.fit.lcurve.empty() && !session.interrupted) {
+    summary.best = out.best.evaluation ? out.p : state.best;
+    summary.stop_reason = out.stop_reason;
+    summary.uncertainty = out.uncertainty;
+    summary.interrupted = out.interrupted || g_interrupted;
+    if (!scenario.fit.lcurve.empty() && !summary.interrupted) {
       if (!args.quiet) fmt::print("L-curve over {} values of gamma\n", scenario.fit.lcurve.size());
-      session.lcurve = run_lcurve(*problem, session.best, scenario.fit.lcurve, options);
-      session.interrupted = g_interrupted;
+      summary.lcurve = run_lcurve(*problem, summary.best, scenario.fit.lcurve, options);
+      summary.interrupted = g_interrupted;
     }
   } catch (const Error& e) {
     // Whatever was accepted so far is in fit-state.yaml and history.csv already.
     fmt::print(stderr, "error: {}\nbest parameters so far are in {}\n", e.what(), state_path);
     return kExitRunFailed;
   }
-  session.history = history.records();
-  session.evaluations = state.evaluations;
-  session.failures = state.failures;
-  session.seconds = state.seconds;
+  summary.history = history.records();
+  summary.evaluations = state.evaluations;
+  summary.failures = state.failures;
+  summary.seconds = state.seconds;
   if (!args.quiet)
-    fmt::print("{} after {} evaluations ({} failed simulations){}\n", session.stop_reason,
+    fmt::print("{} after {} evaluations ({} failed simulations){}\n", summary.stop_reason,
                state.evaluations, state.failures,
-               session.interrupted ? "; writing the best parameters so far" : "");
+               summary.interrupted ? "; writing the best parameters so far" : "");
   try {
-    const std::string report = write_fit_outputs(*problem, session, &g_interrupted);
+    const std::string report = write_fit_outputs(*problem, summary, &g_interrupted);
     fmt::print("rms {:.4f} mm → {:.4f} mm; fitted scenario: {}; report: {}\n",
-               session.history.empty() ? 0.0 : session.history.front().rms * 1e3,
+               summary.history.empty() ? 0.0 : summary.history.front().rms * 1e3,
                state.best_rms * 1e3, (std::filesystem::path(outdir) / "fitted.yaml").string(),
                report);
   } catch (const Error& e) {
     fmt::print(stderr, "error: {}\n", e.what());
     return kExitRunFailed;
   }
-  if (session.interrupted) {
+  if (summary.interrupted) {
     fmt::print(stderr, "interrupted; continue with: kelvin fit {} -o {} --resume\n", args.scenario,
                outdir);
     return kExitInterrupted;

@@ -106,6 +106,8 @@ struct Context {
   int budget = 0;
   bool budget_spent = false;
   Eigen::VectorXd lo, hi;
+  // Without a Gauss–Newton basis the optimiser's x is p ./ unit (ParameterMap::units).
+  Eigen::VectorXd unit;
   double start_gradient = 0, best_gradient = 0;  // projected gradient norms
   double tolerance_scale = 1;                    // of the current stage (see run_fit)
   long best_steps = 0;  // most forward steps of one experiment at the best point
@@ -125,13 +127,14 @@ struct Context {
   bool probed = false;  // see probe_accuracy
 };
 
-/// p − best entry by entry, relative for plain parameters (absolute where the best
-/// is 0) and absolute for log ones (that is, relative in q).
+/// p − best entry by entry: for linear parameters relative to the best's size or the
+/// parameter's unit (ParameterMap::units), whichever is larger; absolute for log ones
+/// (that is, relative in q).
 Eigen::VectorXd offset_from_best(const Context& c, const Eigen::VectorXd& p) {
   const ParameterMap& map = c.problem.map();
   Eigen::VectorXd d = p - c.outcome.p;
   for (long j = 0; j < p.size(); ++j)
-    if (!map.is_log(static_cast<int>(j)) && c.outcome.p[j] != 0) d[j] /= std::abs(c.outcome.p[j]);
+    if (!map.is_log(static_cast<int>(j))) d[j] /= std::max(std::abs(c.outcome.p[j]), c.unit[j]);
   return d;
 }
 
@@ -227,14 +230,14 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
   const Eigen::Map<const Eigen::VectorXd> xv(x.data(), static_cast<long>(x.size()));
   const Eigen::VectorXd p =
       c.basis.size() == 0
-          ? Eigen::VectorXd(xv)
+          ? Eigen::VectorXd(xv.cwiseProduct(c.unit))
           : Eigen::VectorXd((c.origin + c.basis * xv).cwiseMax(c.lo).cwiseMin(c.hi));
   if (!c.remeasure && c.outcome.best.evaluation != 0) {
     // NLopt begins every restart by evaluating its start point, which is the best
     // point, already simulated at these tolerances: no simulation is spent on it.
     if (p == c.outcome.p && (grad.empty() || c.best_g.size() == p.size())) {
-      const Eigen::VectorXd gx =
-          c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * c.best_g) : c.best_g;
+      const Eigen::VectorXd gx = c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * c.best_g)
+                                                : Eigen::VectorXd(c.best_g.cwiseProduct(c.unit));
       if (c.scale == 0) c.scale = objective_scale(true, c.outcome.best.objective, gx, c.first_step);
       if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * gx;
       return c.scale * c.outcome.best.objective;
@@ -317,7 +320,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       }
       if (c.outcome.best.evaluation != 0 && !remeasure) {
         ++c.iteration;
-        c.last_move = (p - c.outcome.p).norm();
+        c.last_move = ((p - c.outcome.p).cwiseQuotient(c.unit)).norm();
         c.last_distance = distance_to_best(c, p);
       }
       c.best_steps = 0;
@@ -332,7 +335,8 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     c.rejected_in_row = r.accepted ? 0 : c.rejected_in_row + 1;
     c.outcome.history.push_back(r);
     if (c.options.on_evaluation) c.options.on_evaluation(r);
-    const Eigen::VectorXd gx = c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g) : g;
+    const Eigen::VectorXd gx = c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g)
+                                              : Eigen::VectorXd(g.cwiseProduct(c.unit));
     if (c.scale == 0) c.scale = objective_scale(ev.ok, r.objective, gx, c.first_step);
     if (!grad.empty()) Eigen::Map<Eigen::VectorXd>(grad.data(), p.size()) = c.scale * gx;
     if (interrupted) {
@@ -420,8 +424,10 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   const Eigen::VectorXd lo = map.lower(), hi = map.upper();
   c.lo = lo;
   c.hi = hi;
-  opt.set_lower_bounds(std::vector<double>(lo.data(), lo.data() + n));
-  opt.set_upper_bounds(std::vector<double>(hi.data(), hi.data() + n));
+  c.unit = map.units();
+  const Eigen::VectorXd xlo = lo.cwiseQuotient(c.unit), xhi = hi.cwiseQuotient(c.unit);
+  opt.set_lower_bounds(std::vector<double>(xlo.data(), xlo.data() + n));
+  opt.set_upper_bounds(std::vector<double>(xhi.data(), xhi.data() + n));
   opt.set_min_objective(objective, &c);
   const int budget = options.max_evaluations - options.first_evaluation;
   if (budget <= 0) {
@@ -436,16 +442,17 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     opt.set_maxtime(std::max(1e-3, options.max_seconds - options.seconds_offset));
   if (algorithm == nlopt::LD_LBFGS) opt.set_vector_storage(std::min(n, 10));
   if (derivative_free) {
-    // BOBYQA's initial trust region: a tenth of the box, at most 0.5 in log space.
+    // BOBYQA's initial trust region: 0.5 in log space, a tenth of the start or of
+    // the unit for linear entries, at most a quarter of the box.
     std::vector<double> step(n);
     for (int j = 0; j < n; ++j)
-      step[j] =
-          std::min(map.is_log(j) ? 0.5 : 0.1 * std::abs(p0[j]) + 1e-12, 0.25 * (hi[j] - lo[j]));
+      step[j] = std::min(map.is_log(j) ? 0.5 : 0.1 * std::max(std::abs(p0[j]) / c.unit[j], 1.0),
+                         0.25 * (xhi[j] - xlo[j]));
     opt.set_initial_step(step);
   }
 
-  std::vector<double> x(p0.data(), p0.data() + n);
-  for (int j = 0; j < n; ++j) x[j] = std::clamp(x[j], lo[j], hi[j]);
+  std::vector<double> x(n);
+  for (int j = 0; j < n; ++j) x[j] = std::clamp(p0[j], lo[j], hi[j]) / c.unit[j];
   // L-BFGS's line search gives up (NLopt "failure", round-off) when its curvature
   // pairs go stale, e.g. after backing off from a failed simulation, or on an
   // ill-conditioned valley. A restart from the best point with a fresh memory and
@@ -584,7 +591,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       c.origin = c.outcome.p;
       x.assign(n, 0.0);
     } else {
-      x.assign(c.outcome.p.data(), c.outcome.p.data() + n);
+      for (int j = 0; j < n; ++j) x[j] = c.outcome.p[j] / c.unit[j];
     }
     opt.set_maxeval(left);
     c.scale = 0;

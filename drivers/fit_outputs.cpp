@@ -50,7 +50,7 @@ std::vector<double> marker_rms(FitProblem& problem, const Eigen::VectorXd& p,
 
 /// Observed frames of `marker` inside the objective window, and the simulated
 /// positions there with the start and the fitted parameters.
-bool track_plot(FitProblem& problem, int k, const std::string& marker, const FitSession& s,
+bool track_plot(FitProblem& problem, int k, const std::string& marker, const FitSummary& s,
                 const std::atomic<bool>* interrupt, TrackPlot& plot) {
   Experiment& ex = problem.experiment(k);
   const MarkerTracks& tracks = ex.scenario().markers.observed;
@@ -97,19 +97,22 @@ void write_marker_rms_csv(const std::string& path, const std::vector<MarkerRms>&
 
 /// One VTU of the fitted (and starting) parameter fields when any block varies
 /// over the body; returns its file name, or "" when every block is global.
-std::string write_parameter_fields(FitProblem& problem, const FitSession& s) {
+std::string write_parameter_fields(FitProblem& problem, const FitSummary& s) {
   const ParameterMap& map = problem.map();
   bool varies = false;
   for (const auto& b : map.blocks()) varies |= b.count > 1;
   if (!varies) return "";
   const Mesh& mesh = problem.experiment(0).scenario().mesh;
   std::vector<std::pair<std::string, Eigen::VectorXd>> fields;
-  for (const auto& b : map.blocks()) {
+  for (int k = 0; k < static_cast<int>(map.blocks().size()); ++k) {
+    const ParameterBlock& b = map.blocks()[k];
     Eigen::VectorXd fitted(mesh.num_tets()), start(mesh.num_tets());
     for (int e = 0; e < mesh.num_tets(); ++e) {
-      const int j = b.entry[e] < 0 ? -1 : b.offset + b.entry[e];
-      fitted[e] = j < 0 ? std::numeric_limits<double>::quiet_NaN() : map.value(s.best, j);
-      start[e] = j < 0 ? std::numeric_limits<double>::quiet_NaN() : map.value(s.start, j);
+      const bool mapped = b.entry[e] >= 0;
+      fitted[e] =
+          mapped ? map.element_value(s.best, k, e) : std::numeric_limits<double>::quiet_NaN();
+      start[e] =
+          mapped ? map.element_value(s.start, k, e) : std::numeric_limits<double>::quiet_NaN();
     }
     fields.emplace_back(b.target, fitted);
     fields.emplace_back(b.target + "_start", start);
@@ -122,7 +125,7 @@ std::string write_parameter_fields(FitProblem& problem, const FitSession& s) {
 
 }  // namespace
 
-std::string write_fit_outputs(FitProblem& problem, const FitSession& s,
+std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
                               const std::atomic<bool>* interrupt) {
   const ParameterMap& map = problem.map();
   FitReportData data;

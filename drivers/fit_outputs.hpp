@@ -13,7 +13,8 @@
 
 namespace kelvin {
 
-struct FitSession {
+/// What a fit found and how it got there: what the outputs are written from.
+struct FitSummary {
   std::string outdir;
   Eigen::VectorXd start, best;     // optimiser space
   std::vector<FitRecord> history;  // every evaluation, resumed runs included
@@ -25,10 +26,10 @@ struct FitSession {
   UncertaintyAtPoint uncertainty;  // see FitOutcome::uncertainty
 };
 
-/// Writes the outputs into session.outdir and returns the path of report.md.
+/// Writes the outputs into summary.outdir and returns the path of report.md.
 /// After an interrupt only what needs no further simulation is written
 /// (fitted.yaml, parameter fields, the report of the history).
-std::string write_fit_outputs(FitProblem& problem, const FitSession& session,
+std::string write_fit_outputs(FitProblem& problem, const FitSummary& summary,
                               const std::atomic<bool>* interrupt);
 
 }  // namespace kelvin

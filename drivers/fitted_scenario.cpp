@@ -41,14 +41,19 @@ double model_value(const FemModel& model, int term, int index, int e) {
   return term < 0 ? model.density()[e] : model.terms()[term].q(index, e);
 }
 
-const MaterialTermSpec& term_spec(const Scenario& s, int term) {
-  return term == 0 ? s.material.elastic : *s.material.viscous;
-}
-
 /// The scalar the scenario gives for a quantity (before any substitution here).
 double scenario_value(const Scenario& s, const FemModel& model, const Column& c) {
   if (c.term < 0) return s.material.density;
-  return term_spec(s, c.term).params.at(model.terms()[c.term].model->params()[c.index].name);
+  return s.material.term(c.term).params.at(model.terms()[c.term].model->params()[c.index].name);
+}
+
+/// The node of term `term` (FemModel order) under `material`: the mapping itself for
+/// a single term, its entry for a list.
+YAML::Node term_node(YAML::Node material, const MaterialSpec& m, int term) {
+  const bool viscous = term >= static_cast<int>(m.elastic.size());
+  YAML::Node kind = material[viscous ? "viscous" : "elastic"];
+  const int k = viscous ? term - static_cast<int>(m.elastic.size()) : term;
+  return kind.IsSequence() ? kind[k] : kind;
 }
 
 /// Writes the scalar of a quantity into the `material` node.
@@ -58,8 +63,8 @@ void set_scalar(YAML::Node material, const Scenario& s, const FemModel& model, c
     material["density"] = exact(v);
     return;
   }
-  YAML::Node term = material[c.term == 0 ? "elastic" : "viscous"];
-  const MaterialTermSpec& spec = term_spec(s, c.term);
+  YAML::Node term = term_node(material, s.material, c.term);
+  const MaterialTermSpec& spec = s.material.term(c.term);
   const std::string name = model.terms()[c.term].model->params()[c.index].name;
   // A λ or μ next to E and ν is refused by the loader, so the pair gives way to the
   // λ and μ it stood for.
@@ -82,8 +87,13 @@ void absolute_paths(const YAML::Node& root, const yamlutil::Doc& d) {
   make_absolute(child(child(root, "mesh"), "file"), d);
   const YAML::Node material = child(root, "material");
   make_absolute(child(material, "fields"), d);
-  for (const char* term : {"elastic", "viscous"})
-    make_absolute(child(child(material, term), "plugin"), d);
+  for (const char* kind : {"elastic", "viscous"}) {
+    const YAML::Node terms = child(material, kind);
+    if (terms.IsDefined() && terms.IsSequence())
+      for (const auto& term : terms) make_absolute(child(term, "plugin"), d);
+    else
+      make_absolute(child(terms, "plugin"), d);
+  }
   if (const YAML::Node clamps = child(root, "clamps"); clamps.IsDefined() && clamps.IsSequence())
     for (const auto& clamp : clamps) make_absolute(child(child(clamp, "motion"), "file"), d);
   const YAML::Node markers = child(root, "markers");
@@ -112,6 +122,14 @@ std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& 
   for (const auto& b : map.blocks()) {
     const Column c{b.target, b.slot.term, b.slot.index};
     if (!scalar.count(c.target)) scalar[c.target] = scenario_value(scenario, model, c);
+    // A multiplier field is written as the field it made: the fit section's start (a
+    // multiplier or coefficients) stays valid against any scalar.
+    if (b.is_multiplier()) {
+      if (std::none_of(columns.begin(), columns.end(),
+                       [&](const Column& o) { return o.target == c.target; }))
+        columns.push_back(c);
+      continue;
+    }
     const auto mapped = std::find_if(b.entry.begin(), b.entry.end(), [](int j) { return j >= 0; });
     if (mapped == b.entry.end()) continue;
     const int first = static_cast<int>(mapped - b.entry.begin());

@@ -44,8 +44,8 @@ std::vector<double> event_times(double rate, double end) {
 std::unique_ptr<FemModel> build_model(const Scenario& s) {
   const int ne = s.mesh.num_tets();
   std::vector<MaterialTerm> terms;
-  terms.push_back(make_term(s.material.elastic, ne));
-  if (s.material.viscous) terms.push_back(make_term(*s.material.viscous, ne));
+  for (const auto& t : s.material.elastic) terms.push_back(make_term(t, ne));
+  for (const auto& t : s.material.viscous) terms.push_back(make_term(t, ne));
   Eigen::VectorXd density = Eigen::VectorXd::Constant(ne, s.material.density);
   for (const auto& f : s.material.fields) {
     // The loader checks this for files; a Scenario assembled in code is not checked.

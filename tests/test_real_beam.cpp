@@ -102,7 +102,7 @@ TEST(RealBeam, GravityReleaseFitFindsTheBendingStiffnessOfTheSilicone) {
   const double rms_start = fit.history.front().rms;  // evaluation 1, at the start
   const double rms_fit = fit.best.rms;
   const double mu = map.value(fit.p, 0), nu = map.value(fit.p, 1);
-  const double lambda = scenario.material.elastic.params.at("lambda");
+  const double lambda = scenario.material.elastic[0].params.at("lambda");
   const double E = mu * (3 * lambda + 2 * mu) / (lambda + mu);
   std::printf(
       "silicone beam: RMS %.4f -> %.4f mm after %d evaluations (%s); mu %.4g Pa, nu %.4g Pa s, "

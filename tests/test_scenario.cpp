@@ -50,14 +50,14 @@ TEST(ScenarioExamples, CantileverGravity) {
   EXPECT_GT(s.mesh.num_tets(), 0);
   EXPECT_NEAR(s.mesh.nodes.row(0).maxCoeff(), 0.2, 1e-12);
   EXPECT_DOUBLE_EQ(s.material.density, 1000);
-  EXPECT_EQ(s.material.elastic.model, "neo-hookean");
+  EXPECT_EQ(s.material.elastic[0].model, "neo-hookean");
   // E = 1e6, nu = 0.3 converted to Lamé parameters.
-  EXPECT_NEAR(s.material.elastic.params.at("lambda"), 1e6 * 0.3 / (1.3 * 0.4), 1e-6);
-  EXPECT_NEAR(s.material.elastic.params.at("mu"), 1e6 / 2.6, 1e-6);
-  EXPECT_EQ(s.material.elastic.params.count("E"), 0u);
-  ASSERT_TRUE(s.material.viscous.has_value());
-  EXPECT_EQ(s.material.viscous->model, "newtonian");
-  EXPECT_DOUBLE_EQ(s.material.viscous->params.at("nu"), 5);
+  EXPECT_NEAR(s.material.elastic[0].params.at("lambda"), 1e6 * 0.3 / (1.3 * 0.4), 1e-6);
+  EXPECT_NEAR(s.material.elastic[0].params.at("mu"), 1e6 / 2.6, 1e-6);
+  EXPECT_EQ(s.material.elastic[0].params.count("E"), 0u);
+  ASSERT_EQ(s.material.viscous.size(), 1u);
+  EXPECT_EQ(s.material.viscous[0].model, "newtonian");
+  EXPECT_DOUBLE_EQ(s.material.viscous[0].params.at("nu"), 5);
   EXPECT_DOUBLE_EQ(s.gravity.z(), -9.81);
   EXPECT_FALSE(s.static_initial);
   ASSERT_EQ(s.clamps.size(), 1u);
@@ -89,12 +89,12 @@ TEST(ScenarioExamples, FoamCylinder) {
   EXPECT_GT(s.mesh.num_nodes(), 0);
   EXPECT_NEAR(s.mesh.nodes.row(2).maxCoeff(), 0.2, 1e-9);
   EXPECT_DOUBLE_EQ(s.material.density, 60);
-  EXPECT_DOUBLE_EQ(s.material.elastic.params.at("lambda"), 1e4);
-  EXPECT_DOUBLE_EQ(s.material.elastic.params.at("mu"), 2e4);
-  ASSERT_TRUE(s.material.viscous.has_value());
-  EXPECT_EQ(s.material.viscous->model, "power-law");
-  EXPECT_DOUBLE_EQ(s.material.viscous->params.at("nu"), 12);
-  EXPECT_DOUBLE_EQ(s.material.viscous->params.at("h"), 1);
+  EXPECT_DOUBLE_EQ(s.material.elastic[0].params.at("lambda"), 1e4);
+  EXPECT_DOUBLE_EQ(s.material.elastic[0].params.at("mu"), 2e4);
+  ASSERT_EQ(s.material.viscous.size(), 1u);
+  EXPECT_EQ(s.material.viscous[0].model, "power-law");
+  EXPECT_DOUBLE_EQ(s.material.viscous[0].params.at("nu"), 12);
+  EXPECT_DOUBLE_EQ(s.material.viscous[0].params.at("h"), 1);
   EXPECT_TRUE(s.static_initial);
   ASSERT_EQ(s.clamps.size(), 1u);
   ASSERT_FALSE(s.clamps[0].nodes.empty());
@@ -149,8 +149,8 @@ TEST(ScenarioDefaults, MinimalFileGetsDefaults) {
   EXPECT_EQ(s.name, "minimal-bar");
   EXPECT_GT(s.mesh.num_tets(), 0);
   EXPECT_NEAR(s.mesh.nodes.row(1).maxCoeff(), 0.02, 1e-12);
-  EXPECT_EQ(s.material.elastic.params.size(), 2u);  // defaults filled in
-  EXPECT_FALSE(s.material.viscous.has_value());
+  EXPECT_EQ(s.material.elastic[0].params.size(), 2u);  // defaults filled in
+  EXPECT_TRUE(s.material.viscous.empty());
   EXPECT_TRUE(s.gravity.isZero());
   EXPECT_FALSE(s.static_initial);
   EXPECT_TRUE(s.clamps.empty());

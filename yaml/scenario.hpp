@@ -14,6 +14,7 @@
 #include "engine/mesh.hpp"
 #include "engine/rigid_motion.hpp"
 #include "engine/selection.hpp"
+#include "materials/material.hpp"
 
 namespace kelvin {
 
@@ -28,19 +29,48 @@ struct MaterialTermSpec {
 /// One column of `material.fields`: a quantity given element by element, which
 /// replaces the scalar of the same name everywhere.
 struct MaterialField {
-  std::string target;      // "density", "elastic.<param>" or "viscous.<param>"
-  int term = -1;           // −1 density, 0 elastic, 1 viscous (FemModel::terms() order)
+  std::string target;      // a MaterialQuantity's name ("density", "elastic.mu", ...)
+  int term = -1;           // −1 density, else the FemModel::terms() index
   int index = 0;           // parameter index in the term's model params()
   Eigen::VectorXd values;  // per element, model units
 };
 
+/// The material: elastic terms (at least one) and viscous terms (any number) whose
+/// stresses add up. A model is built with the elastic terms first, then the viscous
+/// ones (FemModel::terms() order, see term_index).
 struct MaterialSpec {
   double density = 0;  // kg/m³
-  MaterialTermSpec elastic;
-  std::optional<MaterialTermSpec> viscous;
+  std::vector<MaterialTermSpec> elastic, viscous;
   std::string fields_path;            // resolved `material.fields` ("" if none)
   std::vector<MaterialField> fields;  // in the file's column order
+
+  int num_terms() const { return static_cast<int>(elastic.size() + viscous.size()); }
+  /// FemModel::terms() index of term k of the elastic or the viscous list.
+  int term_index(bool is_viscous, int k) const {
+    return is_viscous ? static_cast<int>(elastic.size()) + k : k;
+  }
+  /// The term with FemModel::terms() index `term`.
+  const MaterialTermSpec& term(int term) const;
+  MaterialTermSpec& term(int term);
 };
+
+/// A quantity of the material that fields and fits can name: "density", or a
+/// parameter <p> of a term as "elastic.<p>" / "viscous.<p>" (when only one term of
+/// that kind has <p>) or "elastic[k].<p>" / "viscous[k].<p>" (term k of the list).
+struct MaterialQuantity {
+  std::string name;     // the short form when unambiguous, else the indexed one
+  std::string indexed;  // "elastic[k].<p>"; "density" for the density
+  int term = -1;        // FemModel::terms() index; −1 density
+  int index = 0;        // parameter index in the term's model
+  std::string model;    // the term's model name ("" for the density)
+  ParamInfo info;       // unit, admissible range, positivity
+  double value = 0;     // the scenario's value
+};
+/// Every quantity of the material, density first, terms in FemModel order.
+std::vector<MaterialQuantity> material_quantities(const MaterialSpec& material);
+/// The quantity called `name` (either form), or null.
+const MaterialQuantity* find_quantity(const std::vector<MaterialQuantity>& quantities,
+                                      const std::string& name);
 
 struct ClampSpec {
   std::string name;
@@ -87,16 +117,42 @@ struct SolverSpec {
 
 /// One fitted quantity of the `fit:` section. Values are in model units (Pa, kg/m³…);
 /// the log transform, when on, is applied by the parameter map.
+/// Observation targets (adjoint/parameter_map.hpp, ObservationBlock): the marker
+/// clock's offset, a marker's rest-position offset (`markers.<name>.offset`) and the
+/// capture frame's rigid registration.
+inline const char* kClockOffset = "markers.clock_offset";
+inline const char* kRegistration = "markers.registration";
+/// The marker a `markers.<name>.offset` target names, or "" when it is not one.
+inline std::string marker_of_offset_target(const std::string& target) {
+  const std::string prefix = "markers.", suffix = ".offset";
+  if (target.size() <= prefix.size() + suffix.size() || target.rfind(prefix, 0) != 0 ||
+      target.compare(target.size() - suffix.size(), suffix.size(), suffix) != 0)
+    return "";
+  return target.substr(prefix.size(), target.size() - prefix.size() - suffix.size());
+}
+
+/// The target of a multiplier of every elastic modulus (each parameter in Pa of every
+/// elastic term): the stiffness field scaled by one factor, 1 = the scenario's.
+inline const char* kElasticModuli = "elastic.moduli";
+
 struct FitParameterSpec {
-  std::string target;  // "elastic.<param>", "viscous.<param>" or "density"
-  enum class Scope { Global, PerRegion, PerElement, Boxes } scope = Scope::Global;
+  std::string target;  // a MaterialQuantity's name, or kElasticModuli
+  enum class Scope { Global, PerRegion, PerElement, Boxes, Legendre } scope = Scope::Global;
   /// Scope::Boxes: an element whose centroid lies in box k gets parameter k (first
   /// match); elements in no box share one more parameter.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;  // (min, max)
-  std::optional<double> initial;                                   // default: the scenario's value
-  double lower = 0, upper = 0;  // admissible range (defaults from the model's ParamInfo)
-  bool log = false;             // optimise ln q (default: true for strictly positive q)
-  int line = 0;                 // 1-based line in the scenario file, for messages
+  /// Scope::Legendre: the quantity is the scenario's times exp(Σₖ cₖ Pₖ(s)), Pₖ the
+  /// Legendre polynomials of degree k ≤ `degree` in the element centroid's coordinate
+  /// along `axis` mapped onto [−1, 1] over the mesh; p holds the cₖ (0 = the scenario).
+  int legendre_axis = 2, legendre_degree = 0;
+  std::optional<double> initial;  // default: the scenario's value
+  double lower = 0, upper = 0;    // admissible range (defaults from the model's ParamInfo)
+  bool log = false;               // optimise ln q (default: true for strictly positive q)
+  /// A linear parameter's typical size: the optimiser moves in units of it. 0: |start|,
+  /// or where that is 0 (a nested extension) the size of the scenario's quantities in
+  /// the same unit (see ParameterMap::units).
+  double scale = 0;
+  int line = 0;  // 1-based line in the scenario file, for messages
 };
 
 /// A log-transformed fit parameter bounded only below by 0 (what the loader gives

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <cmath>
 #include <filesystem>
 
 #include "engine/error.hpp"
@@ -23,21 +24,21 @@ using Scope = FitParameterSpec::Scope;
 
 /// What a fit target can be, and its default range and transform.
 struct TargetInfo {
+  std::string name;  // the quantity's canonical name (MaterialQuantity::name)
   std::string unit;
-  double lower = -1e300, upper = 1e300;
+  double lower = -1e300, upper = 1e300;             // admissible range
+  double default_lower = NAN, default_upper = NAN;  // default bounds (NaN: the range)
   bool positive = false;
   double current = 0;  // the scenario's value, the default start
 };
 
-std::vector<ParamInfo> term_params(const MaterialTermSpec& term) {
-  return create_material(term.model, term.plugin)->params();
-}
-
-std::vector<std::string> valid_targets(const Scenario& s) {
-  std::vector<std::string> names = {"density"};
-  for (const auto& p : term_params(s.material.elastic)) names.push_back("elastic." + p.name);
-  if (s.material.viscous)
-    for (const auto& p : term_params(*s.material.viscous)) names.push_back("viscous." + p.name);
+std::vector<std::string> valid_targets(const std::vector<MaterialQuantity>& quantities) {
+  std::vector<std::string> names;
+  for (const auto& q : quantities) names.push_back(q.name);
+  names.push_back(kElasticModuli);
+  names.push_back(kClockOffset);
+  names.push_back(kRegistration);
+  names.push_back("markers.<name>.offset");
   return names;
 }
 
@@ -49,37 +50,48 @@ std::string names_list(const std::vector<std::string>& names) {
 
 TargetInfo resolve_target(const Doc& d, const Node& at, const std::string& P,
                           const std::string& target, const Scenario& s) {
-  if (target == "density") {
+  if (target == kClockOffset || target == kRegistration ||
+      !marker_of_offset_target(target).empty()) {
+    const std::string marker = marker_of_offset_target(target);
+    if (!marker.empty() && std::none_of(s.markers.embedded.begin(), s.markers.embedded.end(),
+                                        [&](const MarkerEmbedding& m) { return m.name == marker; }))
+      d.fail(at, P, fmt::format("'{}' names no marker of this scenario (markers.rest)", target));
     TargetInfo t;
-    t.unit = "kg/m³";
-    t.lower = 0;
-    t.positive = true;
-    t.current = s.material.density;
+    t.name = target;
+    // Observations are linear around 0, the capture as recorded.
+    t.unit = target == kClockOffset ? "s" : (target == kRegistration ? "rad, m" : "m");
+    t.default_lower = target == kClockOffset ? -0.1 : (target == kRegistration ? -0.1 : -0.02);
+    t.default_upper = -t.default_lower;
+    t.positive = false;
+    t.current = 0;
     return t;
   }
-  const auto dot = target.find('.');
-  const std::string part = target.substr(0, dot);
-  const std::string name = dot == std::string::npos ? "" : target.substr(dot + 1);
-  if (part == "viscous" && dot != std::string::npos && !s.material.viscous)
+  if (target == kElasticModuli) {
+    TargetInfo t;
+    t.name = target;
+    t.unit = "1";
+    t.lower = 0;
+    t.positive = true;
+    t.current = 1;  // a multiplier of the scenario's moduli
+    return t;
+  }
+  const std::vector<MaterialQuantity> quantities = material_quantities(s.material);
+  if (const MaterialQuantity* q = find_quantity(quantities, target)) {
+    TargetInfo t;
+    t.name = q->name;
+    t.unit = q->info.unit;
+    t.lower = q->info.lower;
+    t.upper = q->info.upper;
+    t.positive = q->info.positive;
+    t.current = q->value;
+    return t;
+  }
+  const auto names = valid_targets(quantities);
+  if (target.rfind("viscous", 0) == 0 && s.material.viscous.empty())
     d.fail(at, P,
            fmt::format("'{}' names a viscous parameter, but the material has no viscous term "
                        "(material.viscous); fittable: {}",
-                       target, names_list(valid_targets(s))));
-  if (dot != std::string::npos &&
-      (part == "elastic" || (part == "viscous" && s.material.viscous))) {
-    const MaterialTermSpec& term = part == "elastic" ? s.material.elastic : *s.material.viscous;
-    for (const auto& p : term_params(term))
-      if (p.name == name) {
-        TargetInfo t;
-        t.unit = p.unit;
-        t.lower = p.lower;
-        t.upper = p.upper;
-        t.positive = p.positive;
-        t.current = term.params.at(p.name);
-        return t;
-      }
-  }
-  const auto names = valid_targets(s);
+                       target, names_list(names)));
   const std::string hint = yamlutil::suggestion(target, names, "fittable");
   d.fail(at, P,
          fmt::format(
@@ -141,6 +153,26 @@ std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> load_boxes(const Doc& d
   return boxes;
 }
 
+/// `{ legendre: { axis: z, degree: 2 } }`.
+void load_legendre(const Doc& d, const Node& n, const std::string& P, FitParameterSpec& spec) {
+  d.check_keys(n, P, {"legendre"});
+  const std::string LP = join(P, "legendre");
+  const Node l = n["legendre"];
+  d.require_map(l, LP);
+  d.check_keys(l, LP, {"axis", "degree"});
+  spec.legendre_axis =
+      d.choice(d.required(l, LP, "axis"), join(LP, "axis"), {"x", "y", "z"})[0] - 'x';
+  spec.legendre_degree = int_at_least(d, d.required(l, LP, "degree"), join(LP, "degree"), 0);
+  if (spec.legendre_degree > 10)
+    d.fail(l["degree"], join(LP, "degree"),
+           fmt::format("must be at most 10 (got {}): a smooth field along the body needs few "
+                       "terms, and high degrees oscillate between the elements",
+                       spec.legendre_degree));
+}
+
+/// Default range of a Legendre coefficient: the field may vary by e^±5 (≈ 150×).
+constexpr double kLegendreBound = 5;
+
 const char* scope_name(Scope scope) {
   switch (scope) {
     case Scope::Global:
@@ -151,6 +183,8 @@ const char* scope_name(Scope scope) {
       return "per-element";
     case Scope::Boxes:
       return "boxes";
+    case Scope::Legendre:
+      return "legendre";
   }
   return "";
 }
@@ -161,28 +195,61 @@ FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& 
   spec.line = n.Mark().line + 1;
   // `- elastic.mu` is short for `- { target: elastic.mu }`.
   const bool shorthand = n.IsScalar();
-  if (!shorthand) d.check_keys(n, P, {"target", "initial", "lower", "upper", "log", "scope"});
+  if (!shorthand)
+    d.check_keys(n, P, {"target", "initial", "lower", "upper", "log", "scope", "scale"});
   const Node target_node = shorthand ? n : d.required(n, P, "target");
   const std::string TP = shorthand ? P : join(P, "target");
   spec.target = d.string(target_node, TP);
   const TargetInfo info = resolve_target(d, target_node, TP, spec.target, s);
+  spec.target = info.name;  // one spelling per quantity: elastic[0].mu is elastic.mu
   const std::string what = fmt::format("'{}'", spec.target);
   auto range = [&](double lo, double hi) {
     return fmt::format("[{}, {}]{}", fmt_bound(lo), fmt_bound(hi),
                        info.unit.empty() || info.unit == "1" ? "" : " " + info.unit);
   };
 
-  spec.lower = info.lower;
-  spec.upper = info.upper;
+  spec.lower = std::isnan(info.default_lower) ? info.lower : info.default_lower;
+  spec.upper = std::isnan(info.default_upper) ? info.upper : info.default_upper;
   spec.log = info.positive;
   if (shorthand) {
     spec.scope = Scope::Global;
+  } else if (const Node sc = n["scope"]; sc && sc.IsMap() && sc["legendre"]) {
+    // The coefficients of a multiplier field: 0 is the scenario's field.
+    spec.scope = Scope::Legendre;
+    load_legendre(d, sc, join(P, "scope"), spec);
+    if (n["log"])
+      d.fail(n["log"], join(P, "log"), "a Legendre field is fitted in log space already");
+    if (n["scale"])
+      d.fail(n["scale"], join(P, "scale"),
+             "a Legendre field's coefficients are exponents already (unit steps)");
+    spec.log = false;
+    spec.lower = n["lower"] ? d.number(n["lower"], join(P, "lower")) : -kLegendreBound;
+    spec.upper = n["upper"] ? d.number(n["upper"], join(P, "upper")) : kLegendreBound;
+    if (spec.lower >= spec.upper)
+      d.fail(n["upper"] ? n["upper"] : n["lower"], join(P, n["upper"] ? "upper" : "lower"),
+             fmt::format("lower ({:g}) must be below upper ({:g})", spec.lower, spec.upper));
+    spec.initial = n["initial"] ? d.number(n["initial"], join(P, "initial")) : 0.0;
+    if (*spec.initial < spec.lower || *spec.initial > spec.upper)
+      d.fail(n["initial"], join(P, "initial"),
+             fmt::format("{:g} is outside [lower, upper] = [{:g}, {:g}] (Legendre coefficients)",
+                         *spec.initial, spec.lower, spec.upper));
+    return spec;
   } else {
     const Node lo = n["lower"], hi = n["upper"];
     if (lo) spec.lower = d.number(lo, join(P, "lower"));
     if (hi) spec.upper = d.number(hi, join(P, "upper"));
     const Node log_node = n["log"];
     if (log_node) spec.log = boolean(d, log_node, join(P, "log"));
+    if (const Node sc = n["scale"]) {
+      spec.scale = d.number(sc, join(P, "scale"));
+      if (!(spec.scale > 0) || !std::isfinite(spec.scale))
+        d.fail(sc, join(P, "scale"), fmt::format("must be positive (got {:g})", spec.scale));
+      if (spec.log)
+        d.fail(sc, join(P, "scale"),
+               fmt::format("{} is fitted in log space, where steps are relative already; scale "
+                           "applies to log: false",
+                           what));
+    }
     if (spec.log && spec.lower < 0) {
       if (lo)
         d.fail(lo, join(P, "lower"),
@@ -307,7 +374,7 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
   if (params.size() == 0)
     d.fail(params, PP,
            fmt::format("must list at least one parameter to fit (fittable: {})",
-                       names_list(valid_targets(s))));
+                       names_list(valid_targets(material_quantities(s.material)))));
   for (size_t i = 0; i < params.size(); ++i) {
     const std::string IP = yamlutil::index(PP, i);
     FitParameterSpec spec = load_parameter(d, params[i], IP, s);

@@ -161,6 +161,18 @@ MaterialTermSpec load_term(const Doc& d, const Node& n, const std::string& P, bo
   return spec;
 }
 
+/// One term (a mapping) or several (a list of mappings) whose stresses add up.
+std::vector<MaterialTermSpec> load_terms(const Doc& d, const Node& n, const std::string& P,
+                                         bool viscous) {
+  if (!n.IsSequence()) return {load_term(d, n, P, viscous)};
+  if (n.size() == 0)
+    d.fail(n, P, "lists no term; give one mapping { model: ... } or a list of them");
+  std::vector<MaterialTermSpec> terms;
+  for (size_t k = 0; k < n.size(); ++k)
+    terms.push_back(load_term(d, n[k], yamlutil::index(P, k), viscous));
+  return terms;
+}
+
 /// A `material.fields` file as written, with its format checked (the targets and
 /// values are checked against the material by the caller, the element count
 /// against the mesh).
@@ -251,37 +263,17 @@ void check_elements(const FieldsTable& t, int n, bool mesh) {
 }
 
 std::vector<MaterialField> load_fields(const FieldsTable& t, const MaterialSpec& m) {
-  struct Quantity {
-    std::string target;
-    int term;
-    int index;
-    ParamInfo info;
-    std::string model;
-  };
-  std::vector<Quantity> known = {{"density", -1, 0, {}, ""}};
-  known[0].info.unit = "kg/m³";
-  known[0].info.positive = true;
-  known[0].info.lower = 0;
-  const std::vector<const MaterialTermSpec*> terms = {&m.elastic,
-                                                      m.viscous ? &*m.viscous : nullptr};
-  for (int term = 0; term < 2; ++term) {
-    if (!terms[term]) continue;
-    const auto params = create_material(terms[term]->model, terms[term]->plugin)->params();
-    for (int k = 0; k < static_cast<int>(params.size()); ++k)
-      known.push_back({(term == 0 ? "elastic." : "viscous.") + params[k].name, term, k, params[k],
-                       terms[term]->model});
-  }
+  const std::vector<MaterialQuantity> known = material_quantities(m);
   std::vector<std::string> names;
-  for (const auto& q : known) names.push_back(q.target);
+  for (const auto& q : known) names.push_back(q.name);
 
   const int n = static_cast<int>(t.rows.size());
   check_elements(t, n, false);
   std::vector<MaterialField> fields;
   for (size_t c = 0; c < t.targets.size(); ++c) {
     const std::string& target = t.targets[c];
-    const auto q = std::find_if(known.begin(), known.end(),
-                                [&](const Quantity& k) { return k.target == target; });
-    if (q == known.end()) {
+    const MaterialQuantity* q = find_quantity(known, target);
+    if (!q) {
       const std::string hint = yamlutil::suggestion(target, names, "valid");
       throw Error(fmt::format(
           "{}:{}: column {}: '{}' is not a quantity of this material; {}{}", t.path, t.header_line,
@@ -289,10 +281,10 @@ std::vector<MaterialField> load_fields(const FieldsTable& t, const MaterialSpec&
           hint.rfind("did you mean", 0) == 0 ? " (valid: " + names_list(names) + ")" : ""));
     }
     for (size_t o = 0; o < c; ++o)
-      if (t.targets[o] == target)
+      if (find_quantity(known, t.targets[o]) == q)
         throw Error(fmt::format("{}:{}: column {}: '{}' is given twice (first in column {})",
                                 t.path, t.header_line, c + 2, target, o + 2));
-    MaterialField f{target, q->term, q->index, Eigen::VectorXd(n)};
+    MaterialField f{q->name, q->term, q->index, Eigen::VectorXd(n)};
     for (const auto& r : t.rows) {
       const double v = r.values[c];
       const std::string problem = param_problem(q->info, v);
@@ -371,8 +363,8 @@ MaterialSpec load_material(const Doc& d, const Node& n) {
   d.check_keys(n, "material", {"density", "elastic", "viscous", "fields"});
   MaterialSpec m;
   m.density = d.positive(d.required(n, "material", "density"), "material.density", "kg/m³");
-  m.elastic = load_term(d, d.required(n, "material", "elastic"), "material.elastic", false);
-  if (n["viscous"]) m.viscous = load_term(d, n["viscous"], "material.viscous", true);
+  m.elastic = load_terms(d, d.required(n, "material", "elastic"), "material.elastic", false);
+  if (n["viscous"]) m.viscous = load_terms(d, n["viscous"], "material.viscous", true);
   if (const Node f = n["fields"]) {
     m.fields_path = d.existing_file(f, "material.fields");
     try {
@@ -447,3 +439,60 @@ Mesh load_mesh(const Doc& d, const Node& m) {
 }
 
 }  // namespace kelvin::scenario_detail
+
+namespace kelvin {
+
+const MaterialTermSpec& MaterialSpec::term(int t) const {
+  const int ne = static_cast<int>(elastic.size());
+  return t < ne ? elastic.at(t) : viscous.at(t - ne);
+}
+
+MaterialTermSpec& MaterialSpec::term(int t) {
+  const int ne = static_cast<int>(elastic.size());
+  return t < ne ? elastic.at(t) : viscous.at(t - ne);
+}
+
+std::vector<MaterialQuantity> material_quantities(const MaterialSpec& m) {
+  std::vector<MaterialQuantity> out;
+  MaterialQuantity density;
+  density.name = density.indexed = "density";
+  density.info.unit = "kg/m³";
+  density.info.positive = true;
+  density.info.lower = 0;
+  density.value = m.density;
+  out.push_back(density);
+  for (bool is_viscous : {false, true}) {
+    const auto& list = is_viscous ? m.viscous : m.elastic;
+    const std::string kind = is_viscous ? "viscous" : "elastic";
+    std::map<std::string, int> count;  // parameter name → terms of this kind that have it
+    std::vector<std::vector<ParamInfo>> params;
+    for (const auto& term : list) {
+      params.push_back(create_material(term.model, term.plugin)->params());
+      for (const auto& p : params.back()) ++count[p.name];
+    }
+    for (size_t k = 0; k < list.size(); ++k)
+      for (size_t i = 0; i < params[k].size(); ++i) {
+        const ParamInfo& p = params[k][i];
+        MaterialQuantity q;
+        q.indexed = fmt::format("{}[{}].{}", kind, k, p.name);
+        q.name = count[p.name] == 1 ? kind + "." + p.name : q.indexed;
+        q.term = m.term_index(is_viscous, static_cast<int>(k));
+        q.index = static_cast<int>(i);
+        q.model = list[k].model;
+        q.info = p;
+        const auto v = list[k].params.find(p.name);
+        q.value = v == list[k].params.end() ? p.default_value : v->second;
+        out.push_back(q);
+      }
+  }
+  return out;
+}
+
+const MaterialQuantity* find_quantity(const std::vector<MaterialQuantity>& quantities,
+                                      const std::string& name) {
+  for (const auto& q : quantities)
+    if (q.name == name || q.indexed == name) return &q;
+  return nullptr;
+}
+
+}  // namespace kelvin
