@@ -24,5 +24,6 @@ void register_simulate(CLI::App& app, int& exit_code);
 void register_check_material(CLI::App& app, int& exit_code);
 void register_gradcheck(CLI::App& app, int& exit_code);
 void register_fit(CLI::App& app, int& exit_code);
+void register_capture(CLI::App& app, int& exit_code);
 
 }  // namespace kelvin

@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   kelvin::register_check_material(app, exit_code);
   kelvin::register_gradcheck(app, exit_code);
   kelvin::register_fit(app, exit_code);
+  kelvin::register_capture(app, exit_code);
 
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
