@@ -284,6 +284,16 @@ TEST_F(FitSection, LowerOutsideTheModelsRange) {
                  {"fit.parameters[0].lower", "admissible range", "'elastic.mu'"});
 }
 
+TEST_F(FitSection, ScaleIsAPositiveSizeOfALinearParameter) {
+  const Scenario s =
+      load("  parameters:\n    - { target: elastic.mu, log: false, scale: 2.0e4 }\n");
+  EXPECT_EQ(s.fit.parameters[0].scale, 2.0e4);
+  expect_refused("  parameters:\n    - { target: elastic.mu, log: false, scale: -3 }\n", 10,
+                 {"fit.parameters[0].scale", "must be positive (got -3)"});
+  expect_refused("  parameters:\n    - { target: elastic.mu, scale: 1.0e4 }\n", 10,
+                 {"fit.parameters[0].scale", "log space", "log: false"});
+}
+
 TEST_F(FitSection, LogWithNegativeLower) {
   expect_refused("  parameters:\n    - { target: elastic.mu, lower: -1, log: true }\n", 10,
                  {"fit.parameters[0].lower", "log-transformed", "set log: false"});
