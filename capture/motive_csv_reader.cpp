@@ -31,8 +31,6 @@ Capture read_motive_csv(const std::string& path) {
   const auto lines = read_csv_lines(path);
   std::vector<std::pair<int, std::vector<std::string>>> rows;
   for (const auto& [line, text] : lines) rows.push_back({line, split_csv_line(text)});
-  if (!rows.empty() && !rows[0].second.empty() && rows[0].second[0].rfind("\xEF\xBB\xBF", 0) == 0)
-    rows[0].second[0].erase(0, 3);  // a UTF-8 byte-order mark
   if (rows.empty() || cell(rows[0].second, 0) != "Format Version")
     throw Error(fmt::format(
         "{}:1: not a Motive CSV export (the first cell is not 'Format Version')", path));

@@ -92,7 +92,7 @@ void register_capture(CLI::App& app, int& exit_code) {
                   "at rest), or a capture time in s")
       ->capture_default_str();
   cmd->add_option("--duration", a->duration, "seconds after the start to write (default: all)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(positive_number(true));
   cmd->add_option("--rest", a->rest, "also write the markers' rest positions (CSV name,x,y,z)");
   cmd->add_option("--clamp", a->clamps,
                   "BODY=FILE: a rigid body's motion relative to its pose at the start, as a "

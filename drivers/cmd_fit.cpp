@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "drivers/commands.hpp"
@@ -68,7 +69,10 @@ int run(const FitArgs& args) {
   const std::string outdir = args.outdir.empty()
                                  ? std::filesystem::path(args.scenario).stem().string() + "-fit"
                                  : args.outdir;
-  std::filesystem::create_directories(outdir);
+  if (const std::string why = prepare_output_dir(outdir); !why.empty()) {
+    fmt::print(stderr, "error: {}\n", why);
+    return kExitInputError;
+  }
   const std::string state_path = (std::filesystem::path(outdir) / "fit-state.yaml").string();
   const ParameterMap& map = problem->map();
 
@@ -87,6 +91,23 @@ int run(const FitArgs& args) {
             "{}: saved for other parameters ({} entries, first '{}'); the "
             "scenario's fit section changed since — start without --resume",
             state_path, saved.labels.size(), saved.labels.empty() ? "" : saved.labels[0]));
+      // An edited or damaged state must not carry the fit outside its bounds.
+      const Eigen::VectorXd lo = map.lower(), hi = map.upper();
+      for (int j = 0; j < map.size(); ++j)
+        if (!std::isfinite(saved.best[j]) || saved.best[j] < lo[j] || saved.best[j] > hi[j] ||
+            !(std::abs(map.value(saved.best, j)) < 1e300))
+          throw Error(fmt::format(
+              "{}: parameters[{}].best: {} = {:g} ({}) is outside its bounds; start without "
+              "--resume",
+              state_path, j, map.label(j), saved.best[j],
+              map.is_log(j) ? "its logarithm" : "model units"));
+      if (!std::isfinite(saved.best_objective) || !std::isfinite(saved.best_rms) ||
+          saved.evaluations < 0 || saved.iterations < 0 || saved.failures < 0 ||
+          !(saved.seconds >= 0) || !std::isfinite(saved.seconds))
+        throw Error(
+            fmt::format("{}: the saved counters or best values are not finite and "
+                        "non-negative; start without --resume",
+                        state_path));
       history.load_existing();
       state = saved;
       p0 = saved.best;
@@ -197,9 +218,9 @@ void register_fit(CLI::App& app, int& exit_code) {
                 "counters of an interrupted or exhausted fit)");
   cmd->add_option("--max-evaluations", args->max_evaluations,
                   "overrides fit.max_evaluations (counted over resumed runs too)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd->add_option("--max-seconds", args->max_seconds, "overrides fit.max_seconds")
-      ->check(CLI::NonNegativeNumber);
+      ->check(positive_number(true));
   cmd->add_option("--algorithm", args->algorithm, "overrides fit.algorithm")
       ->check(CLI::IsMember({"lbfgs", "mma", "slsqp", "bobyqa"}));
   cmd->add_option("--gradient", args->gradient, "overrides fit.gradient")

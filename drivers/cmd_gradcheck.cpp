@@ -28,7 +28,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
   cmd->add_option("scenario", args->scenario, "scenario YAML file with observed marker tracks")
       ->required();
   cmd->add_option("--end", args->end, "simulate up to this time (s) instead of time.end")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd->add_option("--rtol", args->rtol, "IDAS relative tolerance for the check")
       ->capture_default_str();
   cmd->add_option("--atol", args->atol, "IDAS absolute position tolerance (m)")
@@ -47,7 +47,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
                   "runs need smaller steps, their misfit turning over on a scale of 1/(phase "
                   "sensitivity)")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd->add_flag("--no-forward", args->no_forward,
                 "skip forward sensitivities (their cost grows with the parameter count)");
   cmd->callback([args, &exit_code] {

@@ -24,7 +24,7 @@ void register_simulate(CLI::App& app, int& exit_code) {
   cmd->add_option("-o,--output", args->outdir,
                   "output directory (default: <scenario name>-out in the current directory)");
   cmd->add_option("--end", args->end, "simulate up to this time (s) instead of time.end")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd->add_flag("-q,--quiet", args->quiet, "print only the summary line");
   cmd->callback([args, &exit_code] {
     Scenario scenario;
@@ -33,6 +33,8 @@ void register_simulate(CLI::App& app, int& exit_code) {
       print_notes(scenario);
       if (args->end > 0) {
         scenario.time.end = args->end;
+        if (const std::string why = time_span_problem(scenario.time); !why.empty())
+          throw Error(fmt::format("--end {}: {}", args->end, why));
         for (const auto& c : scenario.clamps)
           if (c.motion->end_time() < args->end)
             throw Error(fmt::format("--end {}: the motion of clamp '{}' ends at t = {} s",
@@ -46,6 +48,11 @@ void register_simulate(CLI::App& app, int& exit_code) {
     const std::string outdir = args->outdir.empty()
                                    ? std::filesystem::path(args->scenario).stem().string() + "-out"
                                    : args->outdir;
+    if (const std::string why = prepare_output_dir(outdir); !why.empty()) {
+      fmt::print(stderr, "error: {}\n", why);
+      exit_code = kExitInputError;
+      return;
+    }
     if (!args->quiet)
       fmt::print("kelvin simulate: {} ({} nodes, {} tetrahedra) → {}\n", scenario.name,
                  scenario.mesh.num_nodes(), scenario.mesh.num_tets(), outdir);

@@ -136,8 +136,14 @@ FitState read_fit_state(const std::string& path) {
       s.best[j] = params[j]["best"].as<double>();
     }
   } catch (const YAML::Exception& e) {
+    // A missing key has no position of its own (line 0): say so instead.
+    if (e.mark.line < 0)
+      throw Error(
+          fmt::format("{}: malformed fit state (truncated, or a key missing): {}", path, e.msg));
     throw Error(fmt::format("{}: line {}: malformed fit state: {}", path, e.mark.line + 1, e.msg));
   }
+  if (static_cast<long>(s.labels.size()) != static_cast<long>(s.best.size()) || s.best.size() == 0)
+    throw Error(fmt::format("{}: malformed fit state: no parameters", path));
   return s;
 }
 

@@ -1,11 +1,36 @@
+#include <unistd.h>
+
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 
 #include "drivers/commands.hpp"
 
 namespace kelvin {
 std::atomic<bool> g_interrupted{false};
+
+std::string prepare_output_dir(const std::string& dir) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    return fmt::format("-o {}: exists and is not a directory", dir);
+  fs::create_directories(dir, ec);
+  if (ec) return fmt::format("-o {}: cannot create the directory ({})", dir, ec.message());
+  const fs::path probe = fs::path(dir) / fmt::format(".kelvin-write-test.{}", ::getpid());
+  {
+    std::ofstream out(probe);
+    out << "x";
+    out.close();
+    if (!out) {
+      fs::remove(probe, ec);
+      return fmt::format("-o {}: cannot write files in the directory", dir);
+    }
+  }
+  fs::remove(probe, ec);
+  return "";
 }
+}  // namespace kelvin
 
 namespace {
 void on_signal(int) {
@@ -31,7 +56,13 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every invalid command line exits 1, as documented.
+    return app.exit(e) == 0 ? kelvin::kExitOk : kelvin::kExitInputError;
+  } catch (const std::exception& e) {
+    // A failure no command caught (a file system error writing outputs, say): a
+    // message and the run-failed code, never an abort.
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return kelvin::kExitRunFailed;
   }
   return exit_code;
 }

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -23,6 +24,7 @@ std::vector<std::pair<int, std::string>> read_csv_lines(const std::string& path)
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (n == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // UTF-8 byte-order mark
     const auto first = line.find_first_not_of(" \t");
     if (first == std::string::npos || line[first] == '#') continue;
     lines.emplace_back(n, line);
@@ -159,6 +161,10 @@ MarkerTracks read_marker_tracks(const std::string& path) {
 ClampSamples read_clamp_csv(const std::string& path) {
   ClampSamples out;
   bool first = true;
+  // Column of t, tx, ty, tz, qw, qx, qy, qz: kelvin's order unless a header names
+  // another (scipy and ROS write quaternions x, y, z, w).
+  static const char* names[8] = {"t", "tx", "ty", "tz", "qw", "qx", "qy", "qz"};
+  int column[8] = {0, 1, 2, 3, 4, 5, 6, 7};
   for (const auto& [n, line] : read_csv_lines(path)) {
     const auto cells = split_csv_line(line);
     if (cells.size() != 8)
@@ -166,17 +172,33 @@ ClampSamples read_clamp_csv(const std::string& path) {
                               cells.size()));
     if (first && is_header_row(cells, 0)) {
       first = false;
+      std::set<std::string> given;
+      for (int k = 0; k < 8; ++k) {
+        const std::string& c = cells[k];
+        const auto it = std::find(std::begin(names), std::end(names), c);
+        if (it == std::end(names) || !given.insert(c).second)
+          throw Error(fmt::format(
+              "{}:{}: column {} of the header is '{}'; a clamp CSV's columns are t, tx, ty, tz, "
+              "qw, qx, qy, qz, in any order, each once",
+              path, n, k + 1, cells[k]));
+        column[it - std::begin(names)] = k;
+      }
       continue;
     }
     first = false;
     double v[8];
-    static const char* names[8] = {"t", "tx", "ty", "tz", "qw", "qx", "qy", "qz"};
-    for (int k = 0; k < 8; ++k) v[k] = number(path, n, cells[k], names[k]);
+    for (int k = 0; k < 8; ++k) v[k] = number(path, n, cells[column[k]], names[k]);
     if (!out.t.empty() && !(v[0] > out.t.back()))
       throw Error(fmt::format("{}:{}: time {} does not increase (previous row: {})", path, n, v[0],
                               out.t.back()));
     Eigen::Vector4d q(v[4], v[5], v[6], v[7]);
-    if (!(q.norm() > 1e-12)) throw Error(fmt::format("{}:{}: the quaternion is zero", path, n));
+    // A unit quaternion to the precision a capture system writes (6 decimals and more);
+    // anything further off is a wrong column or a wrong convention.
+    if (std::abs(q.norm() - 1) > 1e-3)
+      throw Error(
+          fmt::format("{}:{}: the quaternion (qw, qx, qy, qz) = ({}, {}, {}, {}) has norm "
+                      "{:.6g}, not 1",
+                      path, n, v[4], v[5], v[6], v[7], q.norm()));
     q.normalize();
     // q and −q are the same rotation; keep neighbours on one side so that the
     // spline through the components does not swing through zero.

@@ -81,6 +81,10 @@ struct IdasIntegrator::Impl {
   /// frames of IDAS, so they become an unrecoverable failure with their message kept.
   template <class Body>
   int guarded(double t, double& seconds, Body body) {
+    if (opt.interrupt && opt.interrupt->load()) {
+      fatal_message = "interrupted";
+      return -1;
+    }
     const auto start = Clock::now();
     bool ok = false;
     try {
@@ -390,6 +394,10 @@ bool IdasIntegrator::advance_to(double tout, double t_stop, long step_budget) {
   // One step at a time, so that the order of every step can be counted.
   while (m.t_solver < tout) {
     if (step_budget > 0 && m.stats.steps >= step_budget) return false;
+    if (m.opt.interrupt && m.opt.interrupt->load()) {
+      error_ = fmt::format("interrupted at t = {:.6g} s", m.t_solver);
+      return false;
+    }
     if (m.stats.steps >= m.opt.max_steps) {
       // Most often the steps shrank because some element is collapsing: say which.
       IDAGetDky(m.mem, m.t_solver, 0, m.yout);

@@ -6,6 +6,7 @@
 /// in CSC form (pattern fixed at construction) factored by KLU.
 #include <Eigen/Core>
 #include <array>
+#include <atomic>
 #include <functional>
 #include <memory>
 #include <string>
@@ -22,6 +23,11 @@ struct IntegratorOptions {
   long max_steps = 1000000;
   double max_step = 0;      // 0 = unlimited
   double initial_step = 0;  // 0 = IDAS's choice
+  /// Checked before every step and in every residual evaluation: a run caught in
+  /// one long step (a blow-up, Newton failing at ever smaller steps) still stops.
+  /// Not for runs with adjoint checkpoints (IDAS cannot free an adjoint memory whose
+  /// first step failed).
+  const std::atomic<bool>* interrupt = nullptr;
 };
 
 struct IntegratorStats {

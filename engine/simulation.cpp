@@ -34,7 +34,11 @@ MaterialTerm make_term(const MaterialTermSpec& spec, int num_tets) {
 std::vector<double> event_times(double rate, double end) {
   std::vector<double> t;
   if (rate <= 0) return t;
-  const long count = static_cast<long>(std::floor(end * rate * (1 + 1e-12) + 1e-9));
+  // The loader bounds the frame count (time_span_problem); this guards the cast.
+  const double frames = std::floor(end * rate * (1 + 1e-12) + 1e-9);
+  if (!(frames < 1e9))
+    throw Error(fmt::format("{:g} s at {:g} Hz are too many output frames", end, rate));
+  const long count = static_cast<long>(frames);
   for (long k = 0; k <= count; ++k) t.push_back(std::min(end, k / rate));
   return t;
 }
@@ -115,7 +119,11 @@ SimulationResult run_simulation(const Scenario& s, const SimulationOptions& opt)
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   SimulationResult result;
-  std::filesystem::create_directories(opt.outdir);
+  std::error_code ec;
+  std::filesystem::create_directories(opt.outdir, ec);
+  if (ec)
+    throw Error(
+        fmt::format("{}: cannot create the output directory ({})", opt.outdir, ec.message()));
 
   auto model = build_model(s);
   Eigen::VectorXd x0, v0;
@@ -137,6 +145,7 @@ SimulationResult run_simulation(const Scenario& s, const SimulationOptions& opt)
   events[s.time.end];  // always integrate to the end
 
   IntegratorOptions iopt = integrator_options(s.solver);
+  iopt.interrupt = opt.interrupt;
   if (iopt.max_order <= 0) {
     result.order = choose_max_order(*model, iopt, 0.0, s.time.end, x0, v0);
     iopt.max_order = result.order->max_order;
@@ -169,7 +178,10 @@ SimulationResult run_simulation(const Scenario& s, const SimulationOptions& opt)
       break;
     }
     if (t > 0 && !integrator.advance_to(t, s.time.end)) {
-      result.error = integrator.error();
+      if (opt.interrupt && opt.interrupt->load())
+        result.interrupted = true;
+      else
+        result.error = integrator.error();
       ok = false;
       break;
     }

@@ -68,6 +68,20 @@ TEST(MarkerRest, MissingFile) {
   }
 }
 
+// Spreadsheet programs begin a UTF-8 CSV with a byte-order mark.
+TEST(MarkerTracks, AByteOrderMarkIsIgnored) {
+  const auto a = kelvin::read_marker_tracks(data("tracks_ok.csv"));
+  const auto b = kelvin::read_marker_tracks(data("tracks_bom.csv"));
+  EXPECT_EQ(a.names, b.names);
+  EXPECT_EQ(a.times, b.times);
+  ASSERT_EQ(a.xyz.size(), b.xyz.size());
+  for (long k = 0; k < a.xyz.size(); ++k)
+    if (std::isnan(a.xyz(k)))
+      EXPECT_TRUE(std::isnan(b.xyz(k)));
+    else
+      EXPECT_EQ(a.xyz(k), b.xyz(k));
+}
+
 TEST(MarkerTracks, ReadsOcclusionAsNaN) {
   const auto m = kelvin::read_marker_tracks(data("tracks_ok.csv"));
   ASSERT_EQ(m.names.size(), 2u);
@@ -114,7 +128,8 @@ TEST(ClampCsv, NormalisesAndKeepsQuaternionSignsConsistent) {
   EXPECT_DOUBLE_EQ(c.translation[2].x(), 0.02);
   EXPECT_DOUBLE_EQ(c.translation[2].y(), 0.001);
   EXPECT_NEAR((c.quaternion_wxyz[0] - Eigen::Vector4d(1, 0, 0, 0)).norm(), 0, 1e-15);
-  // (-0.6,0,0,-0.8) is flipped to stay near (1,0,0,0); (-3,0,4,0)/5 then flipped again.
+  // Row 1 (norm 1.0004, as rounded output writes) is normalised; (-0.6,0,0,-0.8) is
+  // flipped to stay near (1,0,0,0); (-0.6,0,0.8,0) then flipped again.
   EXPECT_NEAR((c.quaternion_wxyz[1] - Eigen::Vector4d(0.6, 0, 0, 0.8)).norm(), 0, 1e-15);
   EXPECT_NEAR((c.quaternion_wxyz[2] - Eigen::Vector4d(0.6, 0, -0.8, 0)).norm(), 0, 1e-15);
   for (size_t i = 1; i < 3; ++i) EXPECT_GE(c.quaternion_wxyz[i].dot(c.quaternion_wxyz[i - 1]), 0.0);
@@ -123,6 +138,8 @@ TEST(ClampCsv, NormalisesAndKeepsQuaternionSignsConsistent) {
 TEST(ClampCsv, Errors) {
   auto rd = [](const std::string& p) { kelvin::read_clamp_csv(p); };
   expect_error_at(rd, "clamp_zero_q.csv", 2, "quaternion");
+  // Norm 2 is a wrong column or convention, not a rotation to normalise silently.
+  expect_error_at(rd, "clamp_scaled_q.csv", 3, "has norm 2, not 1");
   expect_error_at(rd, "clamp_time.csv", 5, "does not increase");
   expect_error_at(rd, "clamp_bad_columns.csv", 3);
   expect_error_at(rd, "clamp_one_row.csv", 0, "2 rows");

@@ -358,6 +358,18 @@ TEST(FitCli, WritesOutputsResumesAndTheFittedScenarioRuns) {
 
   const auto sim = test::run_kelvin("simulate " + out + "/fitted.yaml -q -o " + out + "/sim");
   EXPECT_EQ(sim.exit_code, 0) << sim.out;
+
+  // A state edited to hold a parameter beyond its bounds is refused, not resumed.
+  std::string state = test::read_text(dir / "out" / "fit-state.yaml");
+  const size_t at = state.find(", best: ");
+  ASSERT_NE(at, std::string::npos) << state;
+  state.replace(at, state.find('}', at) - at, ", best: 1e308");
+  test::write_text(dir / "out" / "fit-state.yaml", state);
+  const auto edited = test::run_kelvin("fit " + (dir / "fit.yaml").string() + " -o " + out +
+                                       " --resume --max-evaluations 6");
+  EXPECT_EQ(edited.exit_code, 1) << edited.out;
+  EXPECT_NE(edited.out.find("fit-state.yaml: parameters[0].best"), std::string::npos) << edited.out;
+  EXPECT_NE(edited.out.find("outside its bounds"), std::string::npos) << edited.out;
 }
 
 TEST(FitCli, InterruptWritesTheBestSoFarAndSaysHowToResume) {

@@ -100,6 +100,11 @@ struct TimeSpec {
   double output_rate = 100;  // frames per second for marker CSV
   double vtu_rate = 0;       // frames per second for VTU output; 0 = none
 };
+/// Output frames are held in memory until written: at most this many marker frames
+/// and VTU frames per run (10⁷ frames of 100 markers are 24 GB of CSV already).
+constexpr double kMaxOutputFrames = 1e7, kMaxVtuFrames = 1e5;
+/// Why a time span cannot be run ("" when it can): too many output frames.
+std::string time_span_problem(const TimeSpec& time);
 
 struct SolverSpec {
   /// At 1e-4 with the automatic order, the markers of the diagnosis bar (V01, BDF2)

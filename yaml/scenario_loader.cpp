@@ -4,6 +4,7 @@
 // material) are checked before the mesh is built, so that a typo costs nothing.
 #include <fmt/format.h>
 
+#include <cmath>
 #include <filesystem>
 
 #include "engine/error.hpp"
@@ -24,6 +25,7 @@ TimeSpec load_time(const Doc& d, const Node& n) {
   t.end = d.positive(d.required(n, P, "end"), "time.end", "s");
   if (n["output_rate"]) t.output_rate = d.positive(n["output_rate"], "time.output_rate", "Hz");
   if (n["vtu_rate"]) t.vtu_rate = d.non_negative(n["vtu_rate"], "time.vtu_rate", "Hz");
+  if (const std::string why = time_span_problem(t); !why.empty()) d.fail(n, P, why);
   return t;
 }
 
@@ -69,6 +71,22 @@ SolverSpec load_solver(const Doc& d, const Node& n) {
 }
 
 }  // namespace
+
+std::string time_span_problem(const TimeSpec& t) {
+  if (!(t.end > 0) || !std::isfinite(t.end))
+    return fmt::format("the end time must be positive and finite (got {})", t.end);
+  if (!(t.end * t.output_rate <= kMaxOutputFrames))
+    return fmt::format(
+        "{:g} s at an output rate of {:g} Hz are {:.3g} marker frames, more than "
+        "the {:g} a run can hold; lower time.output_rate or time.end",
+        t.end, t.output_rate, t.end * t.output_rate, kMaxOutputFrames);
+  if (!(t.end * t.vtu_rate <= kMaxVtuFrames))
+    return fmt::format(
+        "{:g} s at a VTU rate of {:g} Hz are {:.3g} VTU frames, more than the {:g} "
+        "a run can write; lower time.vtu_rate",
+        t.end, t.vtu_rate, t.end * t.vtu_rate, kMaxVtuFrames);
+  return "";
+}
 
 Scenario load_scenario(const std::string& path) {
   const Doc d(path);

@@ -56,8 +56,19 @@ std::string index(const std::string& path, size_t i) {
 
 Doc::Doc(const std::string& path) : file_(path) {
   dir_ = std::filesystem::path(path).parent_path().string();
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw Error(fmt::format("{}: is a directory, not a scenario file", path));
   std::ifstream probe(path);
   if (!probe) throw Error(fmt::format("{}: cannot open the scenario file", path));
+  // A scenario names its data files; one this large is not a scenario, and parsing
+  // it would take minutes and gigabytes.
+  constexpr std::uintmax_t kMaxBytes = 4u << 20;
+  if (const auto size = std::filesystem::file_size(path, ec); !ec && size > kMaxBytes)
+    throw Error(
+        fmt::format("{}: {:.1f} MB is not a scenario file (at most {} MB; large data "
+                    "belong in the CSV and mesh files it names)",
+                    path, size / 1e6, kMaxBytes >> 20));
   try {
     root_ = YAML::LoadFile(path);
   } catch (const YAML::ParserException& e) {

@@ -1,0 +1,169 @@
+// Inputs that once crashed, hung or were silently misread (issue: reliability),
+// each now a clear error with a non-zero exit, or read as meant.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "engine/csv.hpp"
+#include "engine/error.hpp"
+#include "engine/simulation.hpp"
+#include "test_support.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+using test::run_kelvin;
+
+const std::string kBar = R"(
+name: bar
+mesh: { generate: box, lo: [0, 0, 0], hi: [0.1, 0.02, 0.02], element_size: 0.01 }
+material:
+  density: 1000
+  elastic: { model: neo-hookean, lambda: 1.0e5, mu: 1.0e5 }
+gravity: [0, 0, -9.81]
+clamps:
+  - { name: wall, select: { plane: { axis: x, at: 0 } } }
+)";
+
+std::string scenario(const fs::path& dir, const std::string& name, const std::string& tail) {
+  const fs::path p = dir / (name + ".yaml");
+  test::write_text(p, kBar + tail);
+  return p.string();
+}
+
+void expect_input_error(const std::string& args, const std::string& part) {
+  const auto r = run_kelvin(args);
+  EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.out;
+  EXPECT_NE(r.out.find(part), std::string::npos) << args << "\n" << r.out;
+  EXPECT_EQ(r.out.find("terminate"), std::string::npos) << r.out;
+}
+
+}  // namespace
+
+// An end time or an output rate that would schedule more frames than memory holds
+// (1e308 s once made a non-finite floor cast, and 1e12 Hz a 16 GB allocation).
+TEST(BadInputs, TooManyOutputFramesAreRefusedAtTheTimeKey) {
+  const fs::path dir = test::scratch("bad-time");
+  const auto out = (dir / "out").string();
+  expect_input_error("simulate " + scenario(dir, "end", "time: { end: 1.0e308 }\n") + " -o " + out,
+                     "end.yaml:10:7: time: 1e+308 s at an output rate of 100 Hz");
+  expect_input_error(
+      "simulate " + scenario(dir, "rate", "time: { end: 1, output_rate: 1.0e12 }\n") + " -o " + out,
+      "marker frames, more than the 1e+07 a run can hold");
+  expect_input_error(
+      "simulate " + scenario(dir, "vtu", "time: { end: 10, vtu_rate: 1.0e5 }\n") + " -o " + out,
+      "VTU frames");
+  const std::string ok = scenario(dir, "ok", "time: { end: 0.01 }\n");
+  expect_input_error("simulate " + ok + " --end 1e308 -o " + out, "--end 1e+308:");
+  expect_input_error("simulate " + ok + " --end nan -o " + out, "must be a positive finite number");
+  expect_input_error("simulate " + ok + " --end -1 -o " + out, "must be a positive finite number");
+}
+
+TEST(BadInputs, OutputsThatCannotBeWrittenAreInputErrors) {
+  const fs::path dir = test::scratch("bad-output");
+  const std::string ok = scenario(dir, "ok", "time: { end: 0.01 }\n");
+  test::write_text(dir / "a-file", "x");
+  expect_input_error("simulate " + ok + " -o " + (dir / "a-file").string(),
+                     "exists and is not a directory");
+  expect_input_error("simulate " + ok + " -o /proc/kelvin-out", "-o /proc/kelvin-out: cannot");
+}
+
+TEST(BadInputs, ADirectoryOrAHugeFileIsNotAScenario) {
+  const fs::path dir = test::scratch("bad-scenario");
+  expect_input_error("simulate " + dir.string() + " -o " + (dir / "out").string(),
+                     "is a directory, not a scenario file");
+  // A valid YAML document of 5 MB (a long list under an unknown key).
+  {
+    std::ofstream big(dir / "big.yaml");
+    big << kBar << "time: { end: 0.01 }\ndiagnose:\n";
+    for (int k = 0; k < 400000; ++k) big << "  - 123456\n";
+  }
+  expect_input_error("simulate " + (dir / "big.yaml").string() + " -o " + (dir / "out").string(),
+                     "is not a scenario file (at most 4 MB");
+}
+
+TEST(BadInputs, CommandLineRangeErrorsExitOne) {
+  const fs::path dir = test::scratch("bad-cli");
+  const std::string ok = scenario(dir, "ok", "time: { end: 0.01 }\n");
+  expect_input_error("fit " + ok + " --max-evaluations 0", "must be a positive finite number");
+  const auto unknown = run_kelvin("simulate " + ok + " --no-such-option");
+  EXPECT_EQ(unknown.exit_code, 1) << unknown.out;
+}
+
+// scipy and ROS write quaternions x, y, z, w: a header that says so is read so.
+TEST(BadInputs, AClampCsvHeaderSetsTheQuaternionOrder) {
+  const fs::path dir = test::scratch("clamp-order");
+  const double c = std::cos(0.3), s = std::sin(0.3);
+  test::write_text(dir / "wxyz.csv", fmt::format("t,tx,ty,tz,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n"
+                                                 "1,0.1,0,0,{},0,0,{}\n",
+                                                 c, s));
+  test::write_text(dir / "xyzw.csv", fmt::format("t,tx,ty,tz,qx,qy,qz,qw\n0,0,0,0,0,0,0,1\n"
+                                                 "1,0.1,0,0,0,0,{},{}\n",
+                                                 s, c));
+  const ClampSamples a = read_clamp_csv((dir / "wxyz.csv").string());
+  const ClampSamples b = read_clamp_csv((dir / "xyzw.csv").string());
+  ASSERT_EQ(b.quaternion_wxyz.size(), 2u);
+  EXPECT_LT((a.quaternion_wxyz[1] - b.quaternion_wxyz[1]).norm(), 1e-15);
+  EXPECT_NEAR(b.quaternion_wxyz[1][0], c, 1e-15);  // w first inside kelvin
+
+  test::write_text(dir / "typo.csv", "t,tx,ty,tz,qw,qx,qy,qq\n0,0,0,0,1,0,0,0\n1,0,0,0,1,0,0,0\n");
+  try {
+    read_clamp_csv((dir / "typo.csv").string());
+    FAIL() << "a header with an unknown column was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("typo.csv:1: column 8 of the header is 'qq'"),
+              std::string::npos)
+        << e.what();
+  }
+  // A quaternion far from unit length is a wrong column, not a rotation to normalise.
+  test::write_text(dir / "scaled.csv", "0,0,0,0,1,0,0,0\n1,0,0,0,2,0,0,0\n");
+  try {
+    read_clamp_csv((dir / "scaled.csv").string());
+    FAIL() << "a quaternion of norm 2 was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("scaled.csv:2: the quaternion"), std::string::npos)
+        << e.what();
+  }
+}
+
+// A body that blows up (near-zero stiffness under 10⁶ g) once sat inside one long
+// step with SIGINT ignored; the interrupt now ends the step, and the run reports it.
+TEST(BadInputs, AnInterruptStopsARunThatBlowsUpInsideAStep) {
+  const fs::path dir = test::scratch("blow-up");
+  test::write_text(dir / "blow.yaml", R"(
+name: blow
+mesh: { generate: box, lo: [0, 0, 0], hi: [0.1, 0.02, 0.02], element_size: 0.01 }
+material:
+  density: 1000
+  elastic: { model: neo-hookean, lambda: 1.0e-3, mu: 1.0e-3 }
+  viscous: { model: newtonian, nu: 1.0e-6 }
+gravity: [0, 0, -1.0e6]
+clamps:
+  - { name: wall, select: { plane: { axis: x, at: 0 } } }
+time: { end: 0.5 }
+)");
+  const Scenario s = load_scenario((dir / "blow.yaml").string());
+  std::atomic<bool> interrupt{false};
+  SimulationOptions o;
+  o.outdir = (dir / "out").string();
+  o.interrupt = &interrupt;
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    interrupt = true;
+  });
+  const SimulationResult r = run_simulation(s, o);
+  stopper.join();
+  // Uninterrupted, this run spends minutes in its first steps.
+  EXPECT_TRUE(r.interrupted) << r.error;
+  EXPECT_TRUE(r.error.empty()) << r.error;
+  EXPECT_FALSE(r.completed);
+  EXPECT_TRUE(fs::exists(dir / "out" / "summary.txt"));
+}
+
+}  // namespace kelvin
