@@ -60,28 +60,18 @@ std::string combination(const ParameterMap& map, Eigen::VectorXd dp) {
 
 }  // namespace
 
-ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
-                                              const std::atomic<bool>* interrupt) {
-  ParameterUncertainty u;
-  const ParameterMap& map = problem.map();
-  const int n = map.size();
-  if (n > kMaxParameters) {
-    u.error = fmt::format(
-        "parameter uncertainties are not computed for {} parameters (limit {}): they need one "
-        "sensitivity solve per parameter; fit fewer parameters (global or per region) to get them",
-        n, kMaxParameters);
-    return u;
-  }
-
+GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
+                                      const std::atomic<bool>* interrupt) {
+  GaussNewtonSystem g;
   // FitProblem gives every experiment the main scenario's objective.
   const ObjectiveSpec& spec = problem.experiment(0).scenario().fit.objective;
+  const ParameterMap& map = problem.map();
   std::vector<double> residual;
   std::vector<Eigen::RowVectorXd> rows;
-  double rtol = 0;  // loosest solver tolerance: the accuracy of J
   for (int e = 0; e < problem.num_experiments(); ++e) {
     Experiment& ex = problem.experiment(e);
     const Scenario& s = ex.scenario();
-    rtol = std::max(rtol, s.solver.rtol);
+    g.rtol = std::max(g.rtol, s.solver.rtol);
     const MarkerTracks& obs = s.markers.observed;
     const std::vector<UsedMarker> used = used_markers(ex, spec);
     // Runs start at t = 0 (static or rest); frames before that cannot be simulated.
@@ -101,8 +91,8 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
     if (frames.empty()) continue;
     const MarkerTrajectory traj = simulate_markers(ex, map, p, times, true, interrupt);
     if (!traj.ok) {
-      u.error = fmt::format("{}: {}", s.path, traj.error);
-      return u;
+      g.error = fmt::format("{}: {}", s.path, traj.error);
+      return g;
     }
     for (size_t f = 0; f < frames.size(); ++f)
       for (const auto& m : used)
@@ -114,8 +104,33 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
           rows.push_back(m.sqrt_weight * traj.sensitivities[f].row(3 * m.embedded + c));
         }
   }
-
   const int N = static_cast<int>(residual.size());
+  g.residual = Eigen::Map<const Eigen::VectorXd>(residual.data(), N);
+  g.jacobian.resize(N, map.size());
+  for (int i = 0; i < N; ++i) g.jacobian.row(i) = rows[i];
+  g.ok = true;
+  return g;
+}
+
+ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
+                                              const std::atomic<bool>* interrupt) {
+  ParameterUncertainty u;
+  const ParameterMap& map = problem.map();
+  const int n = map.size();
+  if (n > kMaxParameters) {
+    u.error = fmt::format(
+        "parameter uncertainties are not computed for {} parameters (limit {}): they need one "
+        "sensitivity solve per parameter; fit fewer parameters (global or per region) to get them",
+        n, kMaxParameters);
+    return u;
+  }
+  const GaussNewtonSystem sys = gauss_newton_system(problem, p, interrupt);
+  if (!sys.ok) {
+    u.error = sys.error;
+    return u;
+  }
+  const double rtol = sys.rtol;
+  const int N = static_cast<int>(sys.residual.size());
   u.observations = N;
   if (N <= n) {
     u.error = fmt::format(
@@ -124,9 +139,8 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
         N, n);
     return u;
   }
-  Eigen::MatrixXd J(N, n);
-  for (int i = 0; i < N; ++i) J.row(i) = rows[i];
-  const Eigen::VectorXd r = Eigen::Map<const Eigen::VectorXd>(residual.data(), N);
+  const Eigen::MatrixXd& J = sys.jacobian;
+  const Eigen::VectorXd& r = sys.residual;
   u.sigma = std::sqrt(r.squaredNorm() / (N - n));
 
   // Unit columns make the rank decision independent of parameter units (log or not).

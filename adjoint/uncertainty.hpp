@@ -30,6 +30,19 @@ struct UncertaintyAtPoint {
   bool holds(const Eigen::VectorXd& q) const { return p.size() == q.size() && p == q; }
 };
 
+/// The weighted residuals r (simulated − observed, per observed coordinate of every
+/// experiment, at the capture frames in the objective's window) and their Jacobian
+/// J = dr/dp from one forward-sensitivity solve per experiment.
+struct GaussNewtonSystem {
+  bool ok = false;
+  std::string error;
+  Eigen::VectorXd residual;  // N (m)
+  Eigen::MatrixXd jacobian;  // N × p.size()
+  double rtol = 0;           // loosest solver rtol: the accuracy of J
+};
+GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
+                                      const std::atomic<bool>* interrupt = nullptr);
+
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);
 
