@@ -12,6 +12,7 @@
 // and of the truth simulated again at 1e-6.
 //   build/bin/bench_fit [--duration 2] [--rate 180] [--rtol 1e-6] [--truth-rtol 1e-8]
 //                       [--max-evaluations 100] [--cylinder-duration 0.1] [--skip-bar]
+//                       [--max-order auto|1..5]
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -40,6 +41,7 @@ struct Options {
   double duration = 2, rate = 180, rtol = 1e-6, truth_rtol = 1e-8, cylinder_duration = 0.1;
   bool skip_bar = false;
   int max_evaluations = 100;
+  std::string max_order = "auto";  // the bar's solver.max_order
 };
 
 /// Tolerance at which the bar's fitted point and the truth are simulated again.
@@ -48,8 +50,9 @@ constexpr double kCheckRtol = 1e-6;
 /// The bench bar at the fit's duration and rate, with tolerances rtol and rtol·1e-4.
 std::string bar(const std::string& material, const Options& o, double rtol,
                 const std::string& tail) {
-  return bench::bar_scenario(material, o.duration, o.rate,
-                             fmt::format("{{ rtol: {}, atol: {} }}", rtol, rtol * 1e-4), tail);
+  return bench::bar_scenario(
+      material, o.duration, o.rate,
+      fmt::format("{{ rtol: {}, atol: {}, max_order: {} }}", rtol, rtol * 1e-4, o.max_order), tail);
 }
 
 void write(const fs::path& p, const std::string& text) {
@@ -199,6 +202,8 @@ int main(int argc, char** argv) {
       o.cylinder_duration = next();
     else if (a == "--max-evaluations")
       o.max_evaluations = static_cast<int>(next());
+    else if (a == "--max-order" && i + 1 < argc)
+      o.max_order = argv[++i];
     else if (a == "--skip-bar")
       o.skip_bar = true;
     else {
