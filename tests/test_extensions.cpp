@@ -23,12 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-const std::string kMarkers = R"(
-markers:
-  rest:
-    - { name: tip, at: [0.06, 0.01, 0.01] }
-    - { name: mid, at: [0.03, 0.01, 0.02] }
-    - { name: top, at: [0.045, 0.01, 0.02] })";
+const std::string& kMarkers = test::kShakenBarMarkers;
 
 const std::string kNominal = R"(
   density: 1100
@@ -53,18 +48,18 @@ Scenario observing(const fs::path& dir, const std::string& name, const std::stri
   return load_scenario((dir / (name + ".yaml")).string());
 }
 
+/// elastic.moduli on the clamped half of the bar (a box), the rest left nominal.
+FitParameterSpec moduli_of_the_clamped_half() {
+  FitParameterSpec moduli = positive_fit_parameter(kElasticModuli);
+  moduli.scope = FitParameterSpec::Scope::Boxes;
+  moduli.boxes = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.03, 0.02, 0.02)}};
+  return moduli;
+}
+
 Evaluation phi(FitProblem& problem, const Eigen::VectorXd& p) {
   GradientOptions o;
   o.method = GradientMethod::kNone;
   return problem.evaluate(p, o);
-}
-
-FitParameterSpec linear(const std::string& target, double lower, double upper) {
-  FitParameterSpec s;
-  s.target = target;
-  s.lower = lower;
-  s.upper = upper;
-  return s;
 }
 
 }  // namespace
@@ -111,7 +106,7 @@ TEST(Extensions, EveryExtensionAtItsNominalValueReproducesTheNominalModel) {
   // Every map below leaves the nominal values bit for bit (multipliers e⁰ = 1,
   // observations 0): a value block would write exp(ln q), an ulp off, and an
   // adaptive integrator turns an ulp into a trajectory different within its tolerance.
-  FitParameterSpec density = linear("density", -5, 5);
+  FitParameterSpec density = linear_fit_parameter("density", -5, 5);
   density.scope = FitParameterSpec::Scope::Legendre;
   density.legendre_axis = 0;
   density.legendre_degree = 2;
@@ -132,12 +127,10 @@ TEST(Extensions, EveryExtensionAtItsNominalValueReproducesTheNominalModel) {
     - { model: power-law, nu: 20, h: 1 }
     - { model: drag, c: 0 })";
   const Scenario s = observing(dir, "extended", extended, tracks);
-  FitParameterSpec moduli = positive_fit_parameter(kElasticModuli);
-  moduli.scope = FitParameterSpec::Scope::Boxes;
-  moduli.boxes = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.03, 0.02, 0.02)}};
-  FitProblem problem(s,
-                     {moduli, density, linear(kClockOffset, -0.05, 0.05),
-                      linear("markers.tip.offset", -0.01, 0.01), linear(kRegistration, -0.1, 0.1)});
+  FitParameterSpec moduli = moduli_of_the_clamped_half();
+  FitProblem problem(s, {moduli, density, linear_fit_parameter(kClockOffset, -0.05, 0.05),
+                         linear_fit_parameter("markers.tip.offset", -0.01, 0.01),
+                         linear_fit_parameter(kRegistration, -0.1, 0.1)});
   EXPECT_EQ(problem.map().size(), 2 + 3 + 1 + 3 + 6);
   const Evaluation e = phi(problem, problem.map().initial());
   ASSERT_TRUE(e.ok) << e.error;
@@ -158,24 +151,22 @@ TEST(Extensions, GradientsOfEveryExtensionAgreeThreeWays) {
     - { model: power-law, nu: 25, h: 0.9 }
     - { model: drag, c: 1.5 })";
   const Scenario s = observing(dir, "fit", material, tracks);
-  FitParameterSpec moduli = positive_fit_parameter(kElasticModuli);
-  moduli.scope = FitParameterSpec::Scope::Boxes;
-  moduli.boxes = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.03, 0.02, 0.02)}};
+  FitParameterSpec moduli = moduli_of_the_clamped_half();
   moduli.initial = 1.1;
-  FitParameterSpec density = linear("density", -5, 5);
+  FitParameterSpec density = linear_fit_parameter("density", -5, 5);
   density.scope = FitParameterSpec::Scope::Legendre;
   density.legendre_axis = 0;
   density.legendre_degree = 1;
   density.initial = 0.1;
-  FitParameterSpec clock = linear(kClockOffset, -0.05, 0.05);
+  FitParameterSpec clock = linear_fit_parameter(kClockOffset, -0.05, 0.05);
   clock.initial = 0.004;
-  FitParameterSpec offset = linear("markers.tip.offset", -0.01, 0.01);
+  FitParameterSpec offset = linear_fit_parameter("markers.tip.offset", -0.01, 0.01);
   offset.initial = 0.001;
-  FitParameterSpec registration = linear(kRegistration, -0.1, 0.1);
+  FitParameterSpec registration = linear_fit_parameter(kRegistration, -0.1, 0.1);
   registration.initial = 0.01;
   FitProblem problem(
       s, {positive_fit_parameter("elastic.c2"), positive_fit_parameter("elastic.k"),
-          linear("elastic.theta", -4, 4), positive_fit_parameter("viscous.h"),
+          linear_fit_parameter("elastic.theta", -4, 4), positive_fit_parameter("viscous.h"),
           positive_fit_parameter("viscous.c"), moduli, density, clock, offset, registration});
   GradientCheckOptions o;
   o.max_parameters = problem.map().size();
@@ -271,13 +262,14 @@ const std::string kNominalWithFibre = R"(
 INSTANTIATE_TEST_SUITE_P(
     Nested, ExtensionRecovery,
     ::testing::Values(Recovery{"stiffening", kWithStiffening, kNominalWithStiffening,
-                               linear("elastic.c2", 0, 1e7), 3e5, 0.02, ""},
-                      Recovery{"drag", kWithDrag, kNominalWithDrag, linear("viscous.c", 0, 1e4), 40,
-                               0.02, ""},
-                      Recovery{"fibre", kWithFibre, kNominalWithFibre, linear("elastic.k", 0, 1e7),
-                               1e5, 0.02, ""},
-                      Recovery{"clock", kNominal, kNominal, linear(kClockOffset, -0.05, 0.05), 0.01,
-                               0.02, "late"}),
+                               linear_fit_parameter("elastic.c2", 0, 1e7), 3e5, 0.02, ""},
+                      Recovery{"drag", kWithDrag, kNominalWithDrag,
+                               linear_fit_parameter("viscous.c", 0, 1e4), 40, 0.02, ""},
+                      Recovery{"fibre", kWithFibre, kNominalWithFibre,
+                               linear_fit_parameter("elastic.k", 0, 1e7), 1e5, 0.02, ""},
+                      Recovery{"clock", kNominal, kNominal,
+                               linear_fit_parameter(kClockOffset, -0.05, 0.05), 0.01, 0.02,
+                               "late"}),
     [](const auto& info) { return info.param.name; });
 
 // A marker glued off its nominal place: the truth's marker sits at X + δ inside the
@@ -322,7 +314,7 @@ markers:
   test::write_text(dir / "fit.yaml",
                    bar(kNominal, markers(centre) + "\n  observed: " + tracks + "\n", 0.15));
   const Scenario s = load_scenario((dir / "fit.yaml").string());
-  FitProblem problem(s, {linear("markers.tip.offset", -0.01, 0.01)});
+  FitProblem problem(s, {linear_fit_parameter("markers.tip.offset", -0.01, 0.01)});
   FitOptions o;
   o.max_evaluations = 40;
   const FitOutcome out = run_fit(problem, problem.map().initial(), o);

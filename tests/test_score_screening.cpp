@@ -73,12 +73,7 @@ TEST(ScoreScreening, IsExactOnALinearModel) {
 
 // ---- the shaken bar of the gradient tests ---------------------------------------
 
-const std::string kMarkers = R"(
-markers:
-  rest:
-    - { name: tip, at: [0.06, 0.01, 0.01] }
-    - { name: mid, at: [0.03, 0.01, 0.02] }
-    - { name: top, at: [0.045, 0.01, 0.02] })";
+const std::string& kMarkers = test::kShakenBarMarkers;
 
 std::string bar(const std::string& material, const std::string& tail) {
   test::ShakenBar b;
@@ -117,14 +112,6 @@ const std::string kExtended = R"(  density: 1100
     - { model: newtonian, nu: 30 }
     - { model: drag, c: 0 })";
 
-FitParameterSpec linear(const std::string& target, double lower, double upper) {
-  FitParameterSpec s;
-  s.target = target;
-  s.lower = lower;
-  s.upper = upper;
-  return s;
-}
-
 /// Nominal fit of μ and ν, then the scores of stiffening, fibre and drag there.
 std::vector<CandidateScore> screen(const fs::path& dir, const std::string& tracks) {
   test::write_text(dir / "fit.yaml", bar(kExtended, kMarkers + "\n  observed: " + tracks + "\n"));
@@ -137,9 +124,9 @@ std::vector<CandidateScore> screen(const fs::path& dir, const std::string& track
   const FitOutcome out = run_fit(fit, fit.map().initial(), o);
   EXPECT_GT(out.evaluations, 0);
   std::vector<FitParameterSpec> all = nominal;
-  all.push_back(linear("elastic.c2", 0, 1e8));
-  all.push_back(linear("elastic.k", 0, 1e8));
-  all.push_back(linear("viscous.c", 0, 1e5));
+  all.push_back(linear_fit_parameter("elastic.c2", 0, 1e8));
+  all.push_back(linear_fit_parameter("elastic.k", 0, 1e8));
+  all.push_back(linear_fit_parameter("viscous.c", 0, 1e5));
   FitProblem extended(s, all);
   Eigen::VectorXd p = extended.map().initial();
   p.head(2) = out.p;

@@ -66,6 +66,14 @@ struct ShakenBar {
   std::string tail;
 };
 
+/// Three markers on the shaken bar (free end, middle, between), as a `markers:` section.
+inline const std::string kShakenBarMarkers = R"(
+markers:
+  rest:
+    - { name: tip, at: [0.06, 0.01, 0.01] }
+    - { name: mid, at: [0.03, 0.01, 0.02] }
+    - { name: top, at: [0.045, 0.01, 0.02] })";
+
 inline std::string shaken_bar_yaml(const ShakenBar& b) {
   return fmt::format(R"(
 name: {}

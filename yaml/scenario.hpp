@@ -173,6 +173,17 @@ inline FitParameterSpec positive_fit_parameter(
   return s;
 }
 
+/// A parameter fitted as it is (no log) within [lower, upper], for fits set up in
+/// code: nested extensions, whose nominal value is 0.
+inline FitParameterSpec linear_fit_parameter(const std::string& target, double lower,
+                                             double upper) {
+  FitParameterSpec s;
+  s.target = target;
+  s.lower = lower;
+  s.upper = upper;
+  return s;
+}
+
 /// The marker misfit Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ − x̄ᵢ‖² dt over a time window.
 struct ObjectiveSpec {
   std::map<std::string, double> weights;  // marker name → wᵢ (1 when absent; 0 drops it)
