@@ -48,13 +48,17 @@ Experiment::Experiment(const Scenario& scenario, const ObjectiveSpec& objective)
       model_(build_model(scenario)),
       objective_(make_objective(scenario, objective)) {}
 
+void Experiment::apply(const ParameterMap& map, const Eigen::VectorXd& p) {
+  map.apply(p, *model_);
+  objective_.set_observation_vector(
+      map.observation_vector(p, objective_.num_observation_parameters()));
+}
+
 ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
                                       const GradientOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   ExperimentResult result;
-  map.apply(p, *model_);
-  objective_.set_observation_vector(
-      map.observation_vector(p, objective_.num_observation_parameters()));
+  apply(map, p);
   try {
     ExperimentRun run(*this, map, p, options);
     switch (options.method) {

@@ -83,6 +83,9 @@ class Experiment {
   const MarkerObjective& objective() const { return objective_; }
   MarkerObjective& objective() { return objective_; }
 
+  /// Sets the model's material and the objective's observation parameters to p.
+  void apply(const ParameterMap& map, const Eigen::VectorXd& p);
+
   /// Φ and, on request, dΦ/dp at the map's parameters p (applied to the model
   /// first). A failing simulation (inversion, solver failure) is reported in the
   /// result, not thrown: a fitter backs off from such trial parameters.

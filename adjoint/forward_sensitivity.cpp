@@ -37,17 +37,20 @@ void pattern_multiply(const SparsePattern& P, const std::vector<double>& A, cons
 }  // namespace
 
 Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool error_control) {
-  const int np = map.size();
+  // Observation entries do not move the model: only the model's entries are carried.
+  const std::vector<int> entries = map.model_entries();
+  const int ns = static_cast<int>(entries.size());
   const SparsePattern& P = model.pattern();
+  if (ns == 0) return Eigen::MatrixXd(2 * n, 0);
 
   // Initial sensitivities: x₀_p from the static state (zero from rest), v₀_p = 0,
   // and consistent derivatives s_v' = −M⁻¹(K s_x + D s_v + ∂R/∂p) at t₀.
-  Eigen::MatrixXd yS0 = Eigen::MatrixXd::Zero(2 * n, np), ypS0 = Eigen::MatrixXd::Zero(2 * n, np);
+  Eigen::MatrixXd yS0 = Eigen::MatrixXd::Zero(2 * n, ns), ypS0 = Eigen::MatrixXd::Zero(2 * n, ns);
   Eigen::MatrixXd B;
   if (static_initial()) {
     factor_static_stiffness();
     if (!param_vectors(B)) throw Error("an element is inadmissible at the static state");
-    for (int j = 0; j < np; ++j) yS0.col(j).head(n) = -K0->solve(B.col(j));
+    for (int j = 0; j < ns; ++j) yS0.col(j).head(n) = -K0->solve(B.col(entries[j]));
   }
   {
     Eigen::VectorXd y(2 * n), yp(2 * n);
@@ -58,8 +61,8 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
     expand(t0, y.data(), yp.data());
     if (!param_vectors(B)) throw Error("an element is inadmissible at the initial state");
     const AssemblyOutput& out = dae.last_assembly();
-    for (int j = 0; j < np; ++j) {
-      Eigen::VectorXd rhs = -B.col(j);
+    for (int j = 0; j < ns; ++j) {
+      Eigen::VectorXd rhs = -B.col(entries[j]);
       Eigen::VectorXd Ks = Eigen::VectorXd::Zero(n);
       pattern_multiply(P, out.K, yS0.col(j).data(), Ks.data());
       rhs -= Ks;
@@ -69,19 +72,18 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
 
   // Sensitivity error weights scale with the parameter: dy/d(ln q) has the units
   // of y; dy/dq is measured per typical q.
-  Eigen::VectorXd pbar(np);
-  for (const auto& b : map.blocks())
-    for (int j = b.offset; j < b.offset + b.count; ++j)
-      pbar[j] = b.log || b.is_multiplier() ? 1.0 : std::max(std::abs(p[j]), 1e-300);
-  // Observations do not move the model: their sensitivities are zero whatever scale.
-  for (const auto& o : map.observation_blocks()) pbar.segment(o.offset, o.count).setOnes();
+  Eigen::VectorXd pbar(ns);
+  for (int j = 0; j < ns; ++j) {
+    const ParameterBlock& b = map.block_of_entry(entries[j]);
+    pbar[j] = b.log || b.is_multiplier() ? 1.0 : std::max(std::abs(p[entries[j]]), 1e-300);
+  }
 
   auto cache = std::make_shared<StateCache>();
   auto params = std::make_shared<Eigen::MatrixXd>();
   integ.add_sensitivities(
-      [this, cache, params](double t, const double* y, const double* yp, int ns,
-                            const double* const* yS, const double* const* ypS,
-                            double* const* resS) {
+      [this, cache, params, entries](double t, const double* y, const double* yp, int count,
+                                     const double* const* yS, const double* const* ypS,
+                                     double* const* resS) {
         if (!cache->matches(t, y, yp, 2 * n)) {
           if (!dae.stiffness_and_damping(t, y)) return false;
           expand(t, y, yp);
@@ -90,11 +92,11 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
         }
         const AssemblyOutput& out = dae.last_assembly();
         const SparsePattern& P = model.pattern();
-        for (int j = 0; j < ns; ++j) {
+        for (int j = 0; j < count; ++j) {
           double* r = resS[j];
           for (int i = 0; i < n; ++i) r[i] = ypS[j][i] - yS[j][n + i];
           Eigen::Map<Eigen::VectorXd> rv(r + n, n);
-          rv = params->col(j);
+          rv = params->col(entries[j]);
           model.mass_multiply(ypS[j] + n, r + n);
           pattern_multiply(P, out.K, yS[j], r + n);
           pattern_multiply(P, out.D, yS[j] + n, r + n);
@@ -109,29 +111,35 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
   const int n = run.n;
   auto integ = run.start(run.t0, run.x0, run.v0);
   // A gradient for the line search: its accuracy is worth the extra steps.
+  const std::vector<int> entries = run.map.model_entries();
   run.add_sensitivities(*integ, true);
-  integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,
-                                                const double* const* yS, double* const* qS) {
-    Eigen::Matrix3Xd x, v;
-    run.model.expand(t, y, nullptr, x, v);
-    Eigen::VectorXd grad = Eigen::VectorXd::Zero(n);
-    run.objective.add_gradient(t, run.model, x, grad.data());
-    const int nq = run.objective.num_markers() + run.observation_count;
-    for (int j = 0; j < ns; ++j) {
-      // Only the sum over markers is needed: it is carried in component 0.
-      std::fill(qS[j], qS[j] + nq, 0.0);
-      qS[j][0] = grad.dot(Eigen::Map<const Eigen::VectorXd>(yS[j], n));
-    }
-    return true;
-  });
+  if (!entries.empty())
+    integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,
+                                                  const double* const* yS, double* const* qS) {
+      Eigen::Matrix3Xd x, v;
+      run.model.expand(t, y, nullptr, x, v);
+      Eigen::VectorXd grad = Eigen::VectorXd::Zero(n);
+      run.objective.add_gradient(t, run.model, x, grad.data());
+      const int nq = run.objective.num_markers() + run.observation_count;
+      for (int j = 0; j < ns; ++j) {
+        // Only the sum over markers is needed: it is carried in component 0.
+        std::fill(qS[j], qS[j] + nq, 0.0);
+        qS[j][0] = grad.dot(Eigen::Map<const Eigen::VectorXd>(yS[j], n));
+      }
+      return true;
+    });
 
   const bool ok = run.advance(*integ, run.t_end, result);
   result.forward_stats = integ->stats();
   if (!ok) return;  // the quadrature is unreadable after a failure (integrate_segments)
   run.add_quadratures(*integ, result);
-  // Component 0 carries the sum over markers (above); the observation components'
-  // sensitivities are zero: θ does not move the model.
-  result.gradient = integ->quadrature_sensitivities().row(0).transpose();
+  // Component 0 carries the sum over markers (above); observation entries have no
+  // state sensitivity: their gradient is the objective's own.
+  result.gradient = Eigen::VectorXd::Zero(run.map.size());
+  if (!entries.empty()) {
+    const Eigen::MatrixXd qS = integ->quadrature_sensitivities();
+    for (size_t j = 0; j < entries.size(); ++j) result.gradient[entries[j]] = qS(0, j);
+  }
   if (run.observation_count > 0)
     run.map.add_observation_gradient(result.dphi_dtheta, result.gradient);
   result.ok = true;

@@ -218,28 +218,34 @@ void MarkerObjective::add_gradient(double t, const FemModel& model, const Eigen:
   }
 }
 
-void MarkerObjective::observation_gradient(double t, const FemModel& model,
-                                           const Eigen::Matrix3Xd& x, double* out) const {
+Eigen::Matrix3Xd MarkerObjective::pair_jacobian(int i, double t, const FemModel& model,
+                                                const Eigen::Matrix3Xd& x) const {
   const int nm = num_markers();
-  Eigen::Map<Eigen::VectorXd> g(out, num_observation_parameters());
-  g.setZero();
+  Eigen::Matrix3Xd J = Eigen::Matrix3Xd::Zero(3, num_observation_parameters());
+  Eigen::Vector3d xbar, rate;
+  if (!observed(i, t, xbar, &rate)) return J;
   Eigen::Matrix3d R, Jr;
   rotation_and_jacobian(obs_.rotation, R, Jr);
-  Eigen::Vector3d xs, xo, xbar, rate;
-  for (int i = 0; i < nm; ++i) {
+  J.col(0) = -R * rate;  // ∂x̄'/∂τ = R dx̄/dt
+  // ∂x*/∂δ = Σₐ xₐ ∇Nₐᵀ, the element's deformation gradient.
+  const auto& el = model.elements()[embedding_[i].tet];
+  Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
+  for (int a = 0; a < 4; ++a) F += x.col(el.nodes[a]) * el.G.col(a).transpose();
+  J.middleCols<3>(1 + 3 * i) = F;
+  // ∂(R v)/∂ω = −R [v]× J_r, v = x̄ − c; ∂x̄'/∂d = I.
+  J.middleCols<3>(1 + 3 * nm) = R * skew(xbar - centroid_) * Jr;
+  J.middleCols<3>(4 + 3 * nm) = -Eigen::Matrix3d::Identity();
+  return J;
+}
+
+void MarkerObjective::observation_gradient(double t, const FemModel& model,
+                                           const Eigen::Matrix3Xd& x, double* out) const {
+  Eigen::Map<Eigen::VectorXd> g(out, num_observation_parameters());
+  g.setZero();
+  Eigen::Vector3d xs, xo;
+  for (int i = 0; i < num_markers(); ++i) {
     if (!marker_pair(i, t, model, x, xs, xo)) continue;
-    observed(i, t, xbar, &rate);
-    const Eigen::Vector3d r = weight_[i] * (xs - xo);
-    g[0] -= r.dot(R * rate);  // ∂x̄'/∂τ = R dx̄/dt
-    // ∂x*/∂δ = Σₐ xₐ ∇Nₐᵀ, the element's deformation gradient.
-    const auto& el = model.elements()[embedding_[i].tet];
-    Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
-    for (int a = 0; a < 4; ++a) F += x.col(el.nodes[a]) * el.G.col(a).transpose();
-    g.segment<3>(1 + 3 * i) += F.transpose() * r;
-    // ∂(R v)/∂ω = −R [v]× J_r, v = x̄ − c; ∂x̄'/∂d = I.
-    const Eigen::Matrix3d dRv = -R * skew(xbar - centroid_) * Jr;
-    g.segment<3>(1 + 3 * nm) -= dRv.transpose() * r;
-    g.segment<3>(4 + 3 * nm) -= r;
+    g += pair_jacobian(i, t, model, x).transpose() * (weight_[i] * (xs - xo));
   }
 }
 

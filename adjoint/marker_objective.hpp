@@ -66,6 +66,16 @@ class MarkerObjective {
   bool marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                    Eigen::Vector3d& simulated, Eigen::Vector3d& observed) const;
 
+  /// d(x*ᵢ − x̄'ᵢ)/dθ at t (3 × num_observation_parameters()), zero where marker i
+  /// does not count: what the Gauss–Newton system needs beside d x*/dp.
+  Eigen::Matrix3Xd pair_jacobian(int i, double t, const FemModel& model,
+                                 const Eigen::Matrix3Xd& x) const;
+  /// Barycentric weights of marker i with its offset applied, and its tet.
+  Eigen::Vector4d weights(int i, const FemModel& model) const;
+  int tet(int i) const { return embedding_[i].tet; }
+  /// The weight wᵢ of marker i in Φ.
+  double weight(int i) const { return weight_[i]; }
+
   /// ∫ wᵢ dt over marker i's observed intervals in the window: RMSᵢ = sqrt(2Φᵢ / this).
   double weighted_observed_time(int i) const { return weighted_time_[i]; }
   /// Per-marker RMS distances and the overall one, sqrt(2Φ / Σᵢ wᵢTᵢ) — for full
@@ -77,9 +87,6 @@ class MarkerObjective {
   /// Observed position of marker i at t in the capture's own frame and clock, and
   /// on request its time derivative; false when unobserved there.
   bool observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate = nullptr) const;
-  /// Barycentric weights of marker i with its offset applied.
-  Eigen::Vector4d weights(int i, const FemModel& model) const;
-
   std::vector<std::string> names_;
   std::vector<MarkerEmbedding> embedding_;
   std::vector<double> weight_, weighted_time_;

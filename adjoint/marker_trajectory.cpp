@@ -4,6 +4,7 @@
 #include <idas/idas.h>
 #include <nvector/nvector_serial.h>
 
+#include <cmath>
 #include <memory>
 #include <type_traits>
 
@@ -19,19 +20,26 @@ struct VectorDeleter {
 };
 using Vector = std::unique_ptr<std::remove_pointer_t<N_Vector>, VectorDeleter>;
 
-/// d x*/dp (3·markers × np) from position sensitivities over the free dofs
-/// (n × np): clamped nodes follow a prescribed motion and contribute nothing.
-Eigen::MatrixXd marker_sensitivities(const FemModel& model,
-                                     const std::vector<MarkerEmbedding>& markers,
-                                     const Eigen::MatrixXd& sx) {
-  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(3 * markers.size(), sx.cols());
-  for (size_t i = 0; i < markers.size(); ++i)
+/// dr/dp ((3·objective markers) × np) from position sensitivities over the free
+/// dofs (n × np): clamped nodes follow a prescribed motion and contribute nothing;
+/// observation entries from the objective's own derivatives.
+Eigen::MatrixXd residual_sensitivities(const FemModel& model, const MarkerObjective& objective,
+                                       const ParameterMap& map, double t, const Eigen::Matrix3Xd& x,
+                                       const Eigen::MatrixXd& sx) {
+  const int nm = objective.num_markers();
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(3 * nm, sx.cols());
+  for (int i = 0; i < nm; ++i) {
+    const Eigen::Vector4d w = objective.weights(i, model);
     for (int a = 0; a < 4; ++a) {
-      const int node = model.mesh().tets(a, markers[i].tet);
+      const int node = model.mesh().tets(a, objective.tet(i));
       for (int c = 0; c < 3; ++c)
-        if (const int d = model.dof(node, c); d >= 0)
-          out.row(3 * i + c) += markers[i].weights[a] * sx.row(d);
+        if (const int d = model.dof(node, c); d >= 0) out.row(3 * i + c) += w[a] * sx.row(d);
     }
+    if (map.observation_blocks().empty()) continue;
+    const Eigen::Matrix3Xd J = objective.pair_jacobian(i, t, model, x);
+    for (const auto& o : map.observation_blocks())
+      out.block(3 * i, o.offset, 3, o.count) = J.middleCols(o.theta, o.count);
+  }
   return out;
 }
 
@@ -47,7 +55,8 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
   GradientOptions options;
   options.method = with_sensitivities ? GradientMethod::kForward : GradientMethod::kNone;
   options.interrupt = interrupt;
-  map.apply(p, model);
+  experiment.apply(map, p);
+  const MarkerObjective& objective = experiment.objective();
   try {
     ExperimentRun run(experiment, map, p, options);
     for (size_t k = 0; k < times.size(); ++k)
@@ -69,8 +78,9 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
     // point, without it 9.9k steps (the plain run's 9.9k) and 6.2 s.
     if (with_sensitivities) yS0 = run.add_sensitivities(*integ, false);
     const int n = run.n, np = map.size();
+    const std::vector<int> entries = map.model_entries();
     Vector sensitivity(N_VNew_Serial(2 * n, static_cast<SUNContext>(integ->sundials_context())));
-    Eigen::MatrixXd sx(n, np);
+    Eigen::MatrixXd sx = Eigen::MatrixXd::Zero(n, np);
     Eigen::Matrix3Xd x, v;
     ExperimentResult progress;
     for (double t : times) {
@@ -81,18 +91,25 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
       model.expand(t, integ->positions().data(), integ->velocities().data(), x, v);
       out.times.push_back(t);
       out.positions.push_back(marker_positions(model.mesh(), markers, x));
+      Eigen::Matrix3Xd r(3, objective.num_markers());
+      Eigen::Vector3d xs, xo;
+      for (int i = 0; i < objective.num_markers(); ++i)
+        r.col(i) = objective.marker_pair(i, t, model, x, xs, xo) ? Eigen::Vector3d(xs - xo)
+                                                                 : Eigen::Vector3d::Constant(NAN);
+      out.residuals.push_back(r);
       if (!with_sensitivities) continue;
-      if (t == run.t0) {
+      for (size_t j = 0; j < entries.size(); ++j) {
         // Before the first step IDAS has no interpolant to ask.
-        sx = yS0.topRows(n);
-      } else {
-        for (int j = 0; j < np; ++j) {
-          if (IDAGetSensDky1(integ->idas_memory(), t, 0, j, sensitivity.get()) < 0)
-            throw Error(fmt::format("could not interpolate the sensitivities at t = {:.6g} s", t));
-          sx.col(j) = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(sensitivity.get()), n);
+        if (t == run.t0) {
+          sx.col(entries[j]) = yS0.col(static_cast<long>(j)).head(n);
+          continue;
         }
+        if (IDAGetSensDky1(integ->idas_memory(), t, 0, static_cast<int>(j), sensitivity.get()) < 0)
+          throw Error(fmt::format("could not interpolate the sensitivities at t = {:.6g} s", t));
+        sx.col(entries[j]) =
+            Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(sensitivity.get()), n);
       }
-      out.sensitivities.push_back(marker_sensitivities(model, markers, sx));
+      out.residual_sensitivities.push_back(residual_sensitivities(model, objective, map, t, x, sx));
     }
     out.stats = integ->stats();
   } catch (const Error& e) {

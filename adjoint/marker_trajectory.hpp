@@ -17,13 +17,17 @@ struct MarkerTrajectory {
   bool ok = false;
   std::string error;  // why the simulation failed (names the time)
   std::vector<double> times;
-  std::vector<Eigen::Matrix3Xd> positions;  // per time: 3 × markers
-  /// Per time: (3·markers) × p.size(), row 3i+c = d x*_{i,c} / dp. Empty unless asked.
-  std::vector<Eigen::MatrixXd> sensitivities;
+  std::vector<Eigen::Matrix3Xd> positions;  // per time: 3 × embedded markers
+  /// Per time: the residuals rᵢ = x*ᵢ − x̄'ᵢ of the objective's markers as Φ
+  /// compares them (observation parameters applied; 3 × objective markers, NaN where
+  /// marker i does not count at t) and, with sensitivities, dr/dp ((3·objective
+  /// markers) × p.size(), row 3i+c; observation entries included).
+  std::vector<Eigen::Matrix3Xd> residuals;
+  std::vector<Eigen::MatrixXd> residual_sensitivities;
   IntegratorStats stats;  // of the run that made the samples
 };
 
-/// Simulates `experiment` at parameters p of `map` (applied to its model first)
+/// Simulates `experiment` at parameters p of `map` (applied to it first)
 /// and samples the embedded markers at `times` (ascending, within the run).
 MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& map,
                                   const Eigen::VectorXd& p, const std::vector<double>& times,

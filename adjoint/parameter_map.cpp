@@ -111,6 +111,7 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
   const int ne = mesh.num_tets();
   using Scope = FitParameterSpec::Scope;
   for (const auto& spec : specs) {
+    spec_begin_.push_back(size_);
     if (spec.target.rfind("markers.", 0) == 0) {
       ObservationBlock o = observation_block(spec, s, observed);
       o.offset = size_;
@@ -174,14 +175,15 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
       }
       case Scope::Legendre: {
         const int axis = spec.legendre_axis, degree = spec.legendre_degree;
+        const int from = spec.legendre_from;
         const double lo = mesh.nodes.row(axis).minCoeff(), hi = mesh.nodes.row(axis).maxCoeff();
-        b.basis.resize(ne, degree + 1);
+        b.basis.resize(ne, degree + 1 - from);
         for (int e = 0; e < ne; ++e) {
           b.entry[e] = 0;
           const double x = hi > lo ? 2 * (centroid(mesh, e)[axis] - lo) / (hi - lo) - 1 : 0.0;
-          b.basis.row(e) = legendre(x, degree).transpose();
+          b.basis.row(e) = legendre(x, degree).tail(degree + 1 - from).transpose();
         }
-        for (int k = 0; k <= degree; ++k)
+        for (int k = from; k <= degree; ++k)
           suffix.push_back(fmt::format("[P{} along {}]", k, "xyz"[axis]));
         break;
       }
@@ -264,6 +266,20 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
 std::vector<ParamSlot> ParameterMap::slots() const {
   std::vector<ParamSlot> out;
   for (const auto& b : blocks_) out.push_back(b.slot);
+  return out;
+}
+
+std::vector<int> ParameterMap::entries_of_spec(int k) const {
+  const int end = k + 1 < static_cast<int>(spec_begin_.size()) ? spec_begin_[k + 1] : size_;
+  std::vector<int> out;
+  for (int j = spec_begin_[k]; j < end; ++j) out.push_back(j);
+  return out;
+}
+
+std::vector<int> ParameterMap::model_entries() const {
+  std::vector<int> out;
+  for (int j = 0; j < size_; ++j)
+    if (block_of_[j] >= 0) out.push_back(j);
   return out;
 }
 

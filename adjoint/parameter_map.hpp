@@ -82,6 +82,13 @@ class ParameterMap {
   /// Model value of entry j of p.
   double value(const Eigen::VectorXd& p, int j) const;
   bool is_log(int j) const { return block_of_[j] >= 0 && blocks_[block_of_[j]].log; }
+  /// Entries of p that move the model (not observation entries), ascending: the
+  /// ones forward sensitivities carry.
+  std::vector<int> model_entries() const;
+  /// Entries of p that fit.parameters[k] made (specs are laid out in order).
+  std::vector<int> entries_of_spec(int k) const;
+  /// The element block entry j belongs to (j must be a model entry).
+  const ParameterBlock& block_of_entry(int j) const { return blocks_[block_of_[j]]; }
   /// dq/dp of entry j (q for log blocks, 1 otherwise).
   double derivative(const Eigen::VectorXd& p, int j) const;
 
@@ -114,7 +121,8 @@ class ParameterMap {
  private:
   std::vector<ParameterBlock> blocks_;
   std::vector<ObservationBlock> observation_blocks_;
-  std::vector<int> block_of_;  // per entry of p: its element block, or −1 − observation block
+  std::vector<int> spec_begin_;  // per spec: its first entry of p
+  std::vector<int> block_of_;    // per entry of p: its element block, or −1 − observation block
   /// Per block: the value block of its slot (−1: the scenario's value), and the
   /// multiplier blocks of its slot.
   std::vector<int> value_block_;

@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 
 #include <Eigen/QR>
+#include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -54,45 +56,98 @@ double chi_square_survival(double x, int k) {
   return std::exp(log_prefactor) * h;
 }
 
+double chi_square_quantile(double p, int k) {
+  double lo = 0, hi = std::max(1.0, 2.0 * k);
+  while (chi_square_survival(hi, k) > p) hi *= 2;
+  for (int i = 0; i < 200 && hi - lo > 1e-12 * hi; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (chi_square_survival(mid, k) > p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+namespace {
+
+/// P = I − J_θ J_θ⁺ applied through a QR of the fitted columns.
+class Projector {
+ public:
+  Projector(const Eigen::MatrixXd& J, const std::vector<int>& fitted)
+      : nt_(static_cast<int>(fitted.size())), qr_(columns(J, fitted)) {}
+  Eigen::MatrixXd operator()(const Eigen::MatrixXd& A) const {
+    if (nt_ == 0) return A;
+    Eigen::MatrixXd QtA = qr_.householderQ().adjoint() * A;
+    QtA.topRows(nt_).setZero();
+    return qr_.householderQ() * QtA;
+  }
+
+ private:
+  int nt_;
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr_;
+};
+
+}  // namespace
+
 std::vector<CandidateScore> score_candidates(
     const Eigen::VectorXd& r, const Eigen::MatrixXd& J, const std::vector<int>& fitted,
-    const std::vector<std::pair<std::string, std::vector<int>>>& candidates) {
+    const std::vector<std::pair<std::string, std::vector<int>>>& candidates,
+    const ScreeningOptions& options) {
   const long N = r.size();
   const int nt = static_cast<int>(fitted.size());
-  // P applied through a QR of the fitted columns.
-  const Eigen::MatrixXd Jt = columns(J, fitted);
-  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(Jt);
-  const auto project = [&](const Eigen::MatrixXd& A) -> Eigen::MatrixXd {
-    if (nt == 0) return A;
-    Eigen::MatrixXd QtA = qr.householderQ().adjoint() * A;
-    QtA.topRows(nt).setZero();
-    return qr.householderQ() * QtA;
-  };
+  const Projector project(J, fitted);
   const Eigen::VectorXd Pr = project(r);
-  const double sigma2 = r.squaredNorm() / static_cast<double>(std::max<long>(1, N - nt));
+  const double sigma2 = options.noise_variance > 0
+                            ? options.noise_variance
+                            : r.squaredNorm() / static_cast<double>(std::max<long>(1, N - nt));
   const double rms = std::sqrt(r.squaredNorm() / static_cast<double>(std::max<long>(1, N)));
+  const auto bounded = [&](int j) {
+    return std::find(options.nonnegative.begin(), options.nonnegative.end(), j) !=
+           options.nonnegative.end();
+  };
 
   std::vector<CandidateScore> out;
   for (const auto& [name, entries] : candidates) {
     CandidateScore s;
     s.name = name;
     s.entries = entries;
-    s.dof = static_cast<int>(entries.size());
+    s.active = entries;
     s.rms_before = rms;
     s.predicted_rms = rms;
-    const Eigen::MatrixXd PJ = project(columns(J, entries));
-    // A candidate whose sensitivities lie in the span of the fitted ones (or are zero)
-    // cannot be told apart from a change of the fitted parameters.
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> cq(PJ);
-    const double scale = columns(J, entries).norm();
-    if (cq.rank() < s.dof || !(PJ.norm() > 1e-8 * std::max(scale, 1e-300))) {
-      s.error = fmt::format("{} moves the markers only as the fitted parameters do", name);
+    // Active set: an entry at its lower bound whose step would go below it stays there.
+    for (;;) {
+      s.dof = static_cast<int>(s.active.size());
+      s.predicted_drop = 0;
+      s.step.resize(0);
+      if (s.active.empty()) break;
+      const Eigen::MatrixXd Jc = columns(J, s.active);
+      const Eigen::MatrixXd PJ = project(Jc);
+      // A candidate whose sensitivities lie in the span of the fitted ones (or are
+      // zero) cannot be told apart from a change of the fitted parameters.
+      const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> cq(PJ);
+      if (cq.rank() < s.dof || !(PJ.norm() > 1e-8 * std::max(Jc.norm(), 1e-300))) {
+        s.error = fmt::format("{} moves the markers only as the fitted parameters do", name);
+        break;
+      }
+      const Eigen::VectorXd g = PJ.transpose() * Pr;
+      const Eigen::VectorXd unit_step = cq.solve(Pr);  // least squares: PJ step ≈ P r
+      s.predicted_drop = g.dot(unit_step);
+      // Δp = −step / ‖J column‖ (r + J Δp is the linearised residual).
+      s.step.resize(s.dof);
+      int worst = -1;
+      for (int k = 0; k < s.dof; ++k) {
+        s.step[k] = -unit_step[k] / J.col(s.active[k]).norm();
+        if (bounded(s.active[k]) && s.step[k] < 0 && (worst < 0 || s.step[k] < s.step[worst]))
+          worst = k;
+      }
+      if (worst < 0) break;
+      s.active.erase(s.active.begin() + worst);
+    }
+    if (!s.error.empty() || s.active.empty()) {
+      s.dof = static_cast<int>(entries.size());
+      s.predicted_drop = 0;
+      s.step.resize(0);
       out.push_back(s);
       continue;
     }
-    const Eigen::VectorXd g = PJ.transpose() * Pr;
-    const Eigen::VectorXd step = cq.solve(Pr);  // least squares: PJ step ≈ P r
-    s.predicted_drop = g.dot(step);
     s.statistic = s.predicted_drop / sigma2;
     s.p_value = chi_square_survival(s.statistic, s.dof);
     s.predicted_rms =
@@ -100,6 +155,21 @@ std::vector<CandidateScore> score_candidates(
     out.push_back(s);
   }
   return out;
+}
+
+double confounding(const Eigen::MatrixXd& J, const std::vector<int>& fitted,
+                   const std::vector<int>& a, const std::vector<int>& b) {
+  const Projector project(J, fitted);
+  const auto basis = [&](const std::vector<int>& cols) -> Eigen::MatrixXd {
+    const Eigen::MatrixXd PJ = project(columns(J, cols));
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(PJ);
+    const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(PJ.rows(), PJ.cols());
+    return Q.leftCols(qr.rank());
+  };
+  const Eigen::MatrixXd Qa = basis(a), Qb = basis(b);
+  if (Qa.cols() == 0 || Qb.cols() == 0) return 0;
+  const Eigen::MatrixXd C = Qa.transpose() * Qb;
+  return std::min(1.0, Eigen::JacobiSVD<Eigen::MatrixXd>(C).singularValues()[0]);
 }
 
 }  // namespace kelvin

@@ -18,30 +18,6 @@ namespace {
 /// unidentifiable interior anyway.
 constexpr int kMaxParameters = 200;
 
-/// An observed marker of one experiment: its track column, its embedding and √w.
-struct UsedMarker {
-  int column = -1, embedded = -1;
-  double sqrt_weight = 1;
-};
-
-std::vector<UsedMarker> used_markers(Experiment& ex, const ObjectiveSpec& spec) {
-  const Scenario& s = ex.scenario();
-  std::vector<UsedMarker> used;
-  for (const auto& name : ex.objective().names()) {
-    const auto w = spec.weights.find(name);
-    const double weight = w == spec.weights.end() ? 1.0 : w->second;
-    if (!(weight > 0)) continue;
-    UsedMarker m;
-    m.sqrt_weight = std::sqrt(weight);
-    const auto& obs = s.markers.observed.names;
-    m.column = static_cast<int>(std::find(obs.begin(), obs.end(), name) - obs.begin());
-    for (size_t i = 0; i < s.markers.embedded.size(); ++i)
-      if (s.markers.embedded[i].name == name) m.embedded = static_cast<int>(i);
-    used.push_back(m);
-  }
-  return used;
-}
-
 std::string parameter_name(const ParameterMap& map, int j) {
   return map.is_log(j) ? "ln " + map.label(j) : map.label(j);
 }
@@ -61,53 +37,48 @@ std::string combination(const ParameterMap& map, Eigen::VectorXd dp) {
 }  // namespace
 
 GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
-                                      const std::atomic<bool>* interrupt) {
+                                      const std::atomic<bool>* interrupt, bool with_jacobian) {
   GaussNewtonSystem g;
-  // FitProblem gives every experiment the main scenario's objective.
-  const ObjectiveSpec& spec = problem.experiment(0).scenario().fit.objective;
   const ParameterMap& map = problem.map();
   std::vector<double> residual;
   std::vector<Eigen::RowVectorXd> rows;
   for (int e = 0; e < problem.num_experiments(); ++e) {
     Experiment& ex = problem.experiment(e);
     const Scenario& s = ex.scenario();
+    const MarkerObjective& objective = ex.objective();
     g.rtol = std::max(g.rtol, s.solver.rtol);
     const MarkerTracks& obs = s.markers.observed;
-    const std::vector<UsedMarker> used = used_markers(ex, spec);
     // Runs start at t = 0 (static or rest); frames before that cannot be simulated.
-    const double begin = std::max(0.0, ex.objective().window_begin());
-    const double end = ex.objective().window_end();
-    std::vector<int> frames;
+    const double begin = std::max(0.0, objective.window_begin());
+    const double end = objective.window_end();
     std::vector<double> times;
-    for (size_t k = 0; k < obs.times.size(); ++k) {
-      if (obs.times[k] < begin || obs.times[k] > end) continue;
-      bool seen = false;
-      for (const auto& m : used)
-        if (obs.xyz.col(k).segment(3 * m.column, 3).array().isFinite().any()) seen = true;
-      if (!seen) continue;
-      frames.push_back(static_cast<int>(k));
-      times.push_back(obs.times[k]);
-    }
-    if (frames.empty()) continue;
-    const MarkerTrajectory traj = simulate_markers(ex, map, p, times, true, interrupt);
+    for (double t : obs.times)
+      if (t >= begin && t <= end) times.push_back(t);
+    if (times.empty()) continue;
+    const MarkerTrajectory traj = simulate_markers(ex, map, p, times, with_jacobian, interrupt);
     if (!traj.ok) {
       g.error = fmt::format("{}: {}", s.path, traj.error);
       return g;
     }
-    for (size_t f = 0; f < frames.size(); ++f)
-      for (const auto& m : used)
+    for (size_t f = 0; f < times.size(); ++f)
+      for (int i = 0; i < objective.num_markers(); ++i) {
+        const double w = objective.weight(i);
+        if (!(w > 0)) continue;
         for (int c = 0; c < 3; ++c) {
           // Coordinates, not markers, are the samples: a NaN hides just its own.
-          const double observed = obs.xyz(3 * m.column + c, frames[f]);
-          if (!std::isfinite(observed)) continue;
-          residual.push_back(m.sqrt_weight * (traj.positions[f](c, m.embedded) - observed));
-          rows.push_back(m.sqrt_weight * traj.sensitivities[f].row(3 * m.embedded + c));
+          const double r = traj.residuals[f](c, i);
+          if (!std::isfinite(r)) continue;
+          residual.push_back(std::sqrt(w) * r);
+          if (with_jacobian)
+            rows.push_back(std::sqrt(w) * traj.residual_sensitivities[f].row(3 * i + c));
+          g.samples.push_back({e, i, c, times[f], std::sqrt(w)});
         }
+      }
   }
   const int N = static_cast<int>(residual.size());
   g.residual = Eigen::Map<const Eigen::VectorXd>(residual.data(), N);
-  g.jacobian.resize(N, map.size());
-  for (int i = 0; i < N; ++i) g.jacobian.row(i) = rows[i];
+  g.jacobian.resize(with_jacobian ? N : 0, map.size());
+  for (int i = 0; i < g.jacobian.rows(); ++i) g.jacobian.row(i) = rows[i];
   g.ok = true;
   return g;
 }

@@ -30,18 +30,32 @@ struct UncertaintyAtPoint {
   bool holds(const Eigen::VectorXd& q) const { return p.size() == q.size() && p == q; }
 };
 
-/// The weighted residuals r (simulated − observed, per observed coordinate of every
-/// experiment, at the capture frames in the objective's window) and their Jacobian
-/// J = dr/dp from one forward-sensitivity solve per experiment.
+/// Where a residual entry comes from.
+struct ResidualSample {
+  int experiment = 0;
+  int marker = 0;  // in the experiment's MarkerObjective::names()
+  int axis = 0;
+  double t = 0;            // capture frame (s)
+  double sqrt_weight = 1;  // the residual entry is √wᵢ times the distance
+};
+
+/// The weighted residuals r (simulated − observed as Φ compares them, observation
+/// parameters applied, per observed coordinate of every experiment, at the capture
+/// frames in the objective's window) and their Jacobian J = dr/dp from one
+/// forward-sensitivity solve per experiment (observation entries from the
+/// objective's own derivatives).
 struct GaussNewtonSystem {
   bool ok = false;
   std::string error;
-  Eigen::VectorXd residual;  // N (m)
-  Eigen::MatrixXd jacobian;  // N × p.size()
-  double rtol = 0;           // loosest solver rtol: the accuracy of J
+  Eigen::VectorXd residual;             // N (m)
+  Eigen::MatrixXd jacobian;             // N × p.size()
+  std::vector<ResidualSample> samples;  // N, in residual order
+  double rtol = 0;                      // loosest solver rtol: the accuracy of J
 };
+/// Without `with_jacobian` only r (one plain run per experiment).
 GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
-                                      const std::atomic<bool>* interrupt = nullptr);
+                                      const std::atomic<bool>* interrupt = nullptr,
+                                      bool with_jacobian = true);
 
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);

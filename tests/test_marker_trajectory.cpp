@@ -93,7 +93,8 @@ TEST_F(MarkerTrajectoryTest, PositionsMatchTheSimulationsMarkerCsv) {
         simulate_markers(problem.experiment(0), problem.map(), p, truth.times, sensitivities);
     ASSERT_TRUE(traj.ok) << traj.error;
     ASSERT_EQ(traj.positions.size(), truth.times.size());
-    EXPECT_EQ(traj.sensitivities.size(), sensitivities ? truth.times.size() : 0u);
+    EXPECT_EQ(traj.residual_sensitivities.size(), sensitivities ? truth.times.size() : 0u);
+    EXPECT_EQ(traj.residuals.size(), truth.times.size());
     double worst = 0;
     for (size_t k = 0; k < truth.times.size(); ++k) {
       ASSERT_EQ(traj.positions[k].cols(), static_cast<Eigen::Index>(truth.names.size()));
@@ -120,6 +121,10 @@ TEST_F(MarkerTrajectoryTest, SensitivitiesMatchCentralDifferences) {
   const std::vector<double> times{0.0, 0.0137, 0.0371, 0.06};
   const MarkerTrajectory traj = simulate_markers(problem.experiment(0), map, p, times, true);
   ASSERT_TRUE(traj.ok) << traj.error;
+  // Every marker is observed, in the embedding's order: residual rows are marker rows.
+  ASSERT_EQ(problem.experiment(0).objective().names().size(), s.markers.embedded.size());
+  for (size_t i = 0; i < s.markers.embedded.size(); ++i)
+    ASSERT_EQ(problem.experiment(0).objective().names()[i], s.markers.embedded[i].name);
   // Positions differ from run to run by ~4e-11 m (adaptive steps at rtol 1e-9), which
   // a plain central difference divides by δ: for ν (|dx*/dp| ~ 1 mm) that is 4e-4 at
   // δ = 1e-4. Richardson-extrapolated differences are O(δ⁴) and allow δ = 0.02.
@@ -141,7 +146,7 @@ TEST_F(MarkerTrajectoryTest, SensitivitiesMatchCentralDifferences) {
     double error = 0, norm = 0;
     for (size_t k = 0; k < times.size(); ++k) {
       const Eigen::Matrix3Xd fd = (4 * d1[k] - d2[k]) / 3;
-      const Eigen::VectorXd exact = traj.sensitivities[k].col(j);
+      const Eigen::VectorXd exact = traj.residual_sensitivities[k].col(j);
       error += (Eigen::Map<const Eigen::VectorXd>(fd.data(), fd.size()) - exact).squaredNorm();
       norm += exact.squaredNorm();
     }
@@ -150,6 +155,46 @@ TEST_F(MarkerTrajectoryTest, SensitivitiesMatchCentralDifferences) {
                 std::sqrt(norm), rel);
     EXPECT_LT(rel, 1e-5) << map.label(j);
     EXPECT_GT(norm, 1e-10) << map.label(j);  // the markers do move with p_j
+  }
+}
+
+// The observation entries' columns of dr/dp (clock offset, a marker's rest offset,
+// the capture's registration) against central differences of the residuals, at a
+// point off the nominal so that every term of the derivative is exercised.
+TEST_F(MarkerTrajectoryTest, ObservationColumnsMatchCentralDifferences) {
+  const Scenario s = scenario(kStart, "observation-columns");
+  std::vector<FitParameterSpec> specs = params({"elastic.mu"});
+  for (const char* target : {kClockOffset, "markers.tip.offset", kRegistration})
+    specs.push_back(linear_fit_parameter(target, -0.1, 0.1));
+  FitProblem problem(s, specs);
+  const ParameterMap& map = problem.map();
+  ASSERT_EQ(map.size(), 1 + 1 + 3 + 6);
+  Eigen::VectorXd p = map.initial();
+  p.tail(10) << 0.004, 1e-3, -2e-3, 5e-4, 0.02, -0.01, 0.03, 1e-3, 2e-3, -1e-3;
+  const std::vector<double> times{0.0137, 0.0371, 0.06};
+  const MarkerTrajectory traj = simulate_markers(problem.experiment(0), map, p, times, true);
+  ASSERT_TRUE(traj.ok) << traj.error;
+  for (int j = 1; j < map.size(); ++j) {
+    // The clock's step is set by the tracks' curvature, the others by round-off.
+    const double h = j == 1 ? 1e-6 : 1e-4;
+    Eigen::VectorXd pp = p, pm = p;
+    pp[j] += h;
+    pm[j] -= h;
+    const MarkerTrajectory plus = simulate_markers(problem.experiment(0), map, pp, times, true);
+    const MarkerTrajectory minus = simulate_markers(problem.experiment(0), map, pm, times, true);
+    ASSERT_TRUE(plus.ok && minus.ok);
+    double error = 0, norm = 0;
+    for (size_t k = 0; k < times.size(); ++k) {
+      const Eigen::Matrix3Xd fd = (plus.residuals[k] - minus.residuals[k]) / (2 * h);
+      const Eigen::VectorXd exact = traj.residual_sensitivities[k].col(j);
+      error += (Eigen::Map<const Eigen::VectorXd>(fd.data(), fd.size()) - exact).squaredNorm();
+      norm += exact.squaredNorm();
+    }
+    const double rel = std::sqrt(error / norm);
+    std::printf("%s: |dr/dp| = %.3g, relative FD difference %.3g\n", map.label(j).c_str(),
+                std::sqrt(norm), rel);
+    EXPECT_LT(rel, 1e-5) << map.label(j);
+    EXPECT_GT(norm, 1e-6) << map.label(j);
   }
 }
 
@@ -180,8 +225,9 @@ TEST_F(MarkerTrajectoryTest, UncertaintyRecoversTheNoiseLevel) {
   const Eigen::VectorXd p = one.map().initial();  // the true parameters
   const ParameterUncertainty a = gauss_newton_uncertainty(one, p);
   ASSERT_TRUE(a.ok) << a.error;
-  // Frames 10..100 (91) × 4 weighted markers − 20 hidden tip frames, 3 coordinates each.
-  EXPECT_EQ(a.observations, (91 * 4 - 20) * 3);
+  // Frames 10..100 (91) × 4 weighted markers − 21 tip frames, 3 coordinates each: as
+  // in Φ, a frame counts when the interval ending there was seen (frame 50 does not).
+  EXPECT_EQ(a.observations, (91 * 4 - 21) * 3);
   EXPECT_NEAR(a.sigma, 1e-3, 0.1e-3);
   ASSERT_EQ(a.covariance.rows(), 4);
   EXPECT_LT((a.covariance - a.covariance.transpose()).norm(), 1e-12 * a.covariance.norm());

@@ -71,6 +71,64 @@ TEST(ScoreScreening, IsExactOnALinearModel) {
   EXPECT_FALSE(twin[0].error.empty());
 }
 
+TEST(ChiSquare, QuantileInvertsTheSurvival) {
+  EXPECT_NEAR(chi_square_quantile(0.05, 1), 3.841459, 1e-5);
+  EXPECT_NEAR(chi_square_quantile(0.001, 3), 16.26624, 1e-4);
+  for (int k : {1, 2, 5, 40})
+    for (double p : {0.5, 1e-2, 1e-6})
+      EXPECT_NEAR(chi_square_survival(chi_square_quantile(p, k), k), p, 1e-9 * std::max(p, 1e-3));
+}
+
+// A nested modulus at its bound: the data asking for a negative value is no
+// evidence for it (the constrained refit stays at 0), and of two bounded columns
+// only the one with an admissible step is used.
+TEST(ScoreScreening, BoundedEntriesTakeNoStepBelowTheirBound) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0, 0.1);
+  const int N = 300;
+  Eigen::MatrixXd J(N, 3);
+  Eigen::VectorXd y(N);
+  for (int i = 0; i < N; ++i) {
+    const double t = i / double(N);
+    J.row(i) << 1, std::sin(5 * t), std::cos(11 * t);
+    y[i] = 1 - 0.5 * std::sin(5 * t) + 0.3 * std::cos(11 * t) + noise(rng);
+  }
+  const Eigen::VectorXd r = J.col(0) * J.col(0).dot(y) / N - y;  // nominal: the mean
+  ScreeningOptions o;
+  o.nonnegative = {1, 2};
+  o.noise_variance = 0.01;  // the sine left in r would inflate ‖r‖² / (N − 1) 13×
+  const auto s = score_candidates(r, J, {0}, {{"sine", {1}}, {"cosine", {2}}, {"both", {1, 2}}}, o);
+  EXPECT_EQ(s[0].predicted_drop, 0);  // the data want −0.5
+  EXPECT_TRUE(s[0].active.empty());
+  EXPECT_GT(s[1].statistic, 100);
+  ASSERT_EQ(s[1].step.size(), 1);
+  // On a linear model the step is the refit's coefficient (the constant refitted too).
+  Eigen::MatrixXd B(N, 2);
+  B << J.col(0), J.col(2);
+  EXPECT_NEAR(s[1].step[0], B.colPivHouseholderQr().solve(y)[1], 1e-10);
+  ASSERT_EQ(s[2].active, std::vector<int>{2});
+  EXPECT_NEAR(s[2].predicted_drop, s[1].predicted_drop, 1e-12);
+  // Unbounded, the sine's step is its (negative) coefficient.
+  const auto free = score_candidates(r, J, {0}, {{"sine", {1}}});
+  ASSERT_EQ(free[0].step.size(), 1);
+  B.col(1) = J.col(1);
+  EXPECT_NEAR(free[0].step[0], B.colPivHouseholderQr().solve(y)[1], 1e-10);
+  EXPECT_LT(free[0].step[0], 0);
+}
+
+TEST(ScoreScreening, ConfoundingIsTheCanonicalCorrelation) {
+  const int N = 500;
+  Eigen::MatrixXd J(N, 4);
+  for (int i = 0; i < N; ++i) {
+    const double t = i / double(N);
+    J.row(i) << 1, t, t + 0.01 * std::sin(40 * t), std::sin(9 * t);
+  }
+  // Columns 1 and 2 are nearly the same effect; 3 is another one.
+  EXPECT_GT(confounding(J, {0}, {1}, {2}), 0.99);
+  EXPECT_LT(confounding(J, {0}, {1}, {3}), 0.9);
+  EXPECT_NEAR(confounding(J, {0}, {1, 3}, {3}), 1, 1e-12);  // a shared column
+}
+
 // ---- the shaken bar of the gradient tests ---------------------------------------
 
 const std::string& kMarkers = test::kShakenBarMarkers;

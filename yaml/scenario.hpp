@@ -147,9 +147,10 @@ struct FitParameterSpec {
   /// match); elements in no box share one more parameter.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;  // (min, max)
   /// Scope::Legendre: the quantity is the scenario's times exp(Σₖ cₖ Pₖ(s)), Pₖ the
-  /// Legendre polynomials of degree k ≤ `degree` in the element centroid's coordinate
-  /// along `axis` mapped onto [−1, 1] over the mesh; p holds the cₖ (0 = the scenario).
-  int legendre_axis = 2, legendre_degree = 0;
+  /// Legendre polynomials of degree `from` ≤ k ≤ `degree` in the element centroid's
+  /// coordinate along `axis` mapped onto [−1, 1] over the mesh; p holds the cₖ (0 = the
+  /// scenario). `from` = 1 leaves the mean to a global parameter fitted beside it.
+  int legendre_axis = 2, legendre_degree = 0, legendre_from = 0;
   std::optional<double> initial;  // default: the scenario's value
   double lower = 0, upper = 0;    // admissible range (defaults from the model's ParamInfo)
   bool log = false;               // optimise ln q (default: true for strictly positive q)

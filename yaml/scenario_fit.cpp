@@ -153,13 +153,13 @@ std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> load_boxes(const Doc& d
   return boxes;
 }
 
-/// `{ legendre: { axis: z, degree: 2 } }`.
+/// `{ legendre: { axis: z, degree: 2, from: 1 } }`.
 void load_legendre(const Doc& d, const Node& n, const std::string& P, FitParameterSpec& spec) {
   d.check_keys(n, P, {"legendre"});
   const std::string LP = join(P, "legendre");
   const Node l = n["legendre"];
   d.require_map(l, LP);
-  d.check_keys(l, LP, {"axis", "degree"});
+  d.check_keys(l, LP, {"axis", "degree", "from"});
   spec.legendre_axis =
       d.choice(d.required(l, LP, "axis"), join(LP, "axis"), {"x", "y", "z"})[0] - 'x';
   spec.legendre_degree = int_at_least(d, d.required(l, LP, "degree"), join(LP, "degree"), 0);
@@ -168,6 +168,13 @@ void load_legendre(const Doc& d, const Node& n, const std::string& P, FitParamet
            fmt::format("must be at most 10 (got {}): a smooth field along the body needs few "
                        "terms, and high degrees oscillate between the elements",
                        spec.legendre_degree));
+  if (const Node from = l["from"]) {
+    spec.legendre_from = int_at_least(d, from, join(LP, "from"), 0);
+    if (spec.legendre_from > spec.legendre_degree)
+      d.fail(from, join(LP, "from"),
+             fmt::format("must be at most the degree {} (got {})", spec.legendre_degree,
+                         spec.legendre_from));
+  }
 }
 
 /// Default range of a Legendre coefficient: the field may vary by e^±5 (≈ 150×).
