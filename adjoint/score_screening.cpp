@@ -73,6 +73,11 @@ class Projector {
  public:
   Projector(const Eigen::MatrixXd& J, const std::vector<int>& fitted)
       : nt_(static_cast<int>(fitted.size())), qr_(columns(J, fitted)) {}
+  /// The least-squares x of (scaled) J_θ x ≈ b.
+  Eigen::VectorXd solve(const Eigen::VectorXd& b) const {
+    if (nt_ == 0) return {};
+    return qr_.solve(b);
+  }
   Eigen::MatrixXd operator()(const Eigen::MatrixXd& A) const {
     if (nt_ == 0) return A;
     Eigen::MatrixXd QtA = qr_.householderQ().adjoint() * A;
@@ -138,7 +143,14 @@ std::vector<CandidateScore> score_candidates(
         if (bounded(s.active[k]) && s.step[k] < 0 && (worst < 0 || s.step[k] < s.step[worst]))
           worst = k;
       }
-      if (worst < 0) break;
+      if (worst < 0) {
+        // The fitted parameters move with it: J_θ Δθ ≈ −(r + J_φ Δφ).
+        Eigen::VectorXd rhs = -r;
+        for (int k = 0; k < s.dof; ++k) rhs -= J.col(s.active[k]) * s.step[k];
+        s.fitted_step = project.solve(rhs);
+        for (int k = 0; k < nt; ++k) s.fitted_step[k] /= J.col(fitted[k]).norm();
+        break;
+      }
       s.active.erase(s.active.begin() + worst);
     }
     if (!s.error.empty() || s.active.empty()) {

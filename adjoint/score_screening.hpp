@@ -16,13 +16,14 @@ namespace kelvin {
 
 struct CandidateScore {
   std::string name;
-  std::vector<int> entries;                  // of p
-  std::vector<int> active;                   // the entries the step moves (see nonnegative)
-  Eigen::VectorXd step;                      // Gauss–Newton Δp of `active` (p units)
-  int dof = 0;                               // n_φ: active entries
-  double statistic = 0;                      // LM
-  double p_value = 1;                        // P(χ²(dof) ≥ LM)
-  double predicted_drop = 0;                 // of ‖r‖² (m²)
+  std::vector<int> entries;     // of p
+  std::vector<int> active;      // the entries the step moves (see nonnegative)
+  Eigen::VectorXd step;         // Gauss–Newton Δp of `active` (p units)
+  Eigen::VectorXd fitted_step;  // with it, the fitted entries' Δp (p units, `fitted` order)
+  int dof = 0;                  // n_φ: active entries
+  double statistic = 0;         // LM
+  double p_value = 1;           // P(χ²(dof) ≥ LM)
+  double predicted_drop = 0;    // of ‖r‖² (m²)
   double rms_before = 0, predicted_rms = 0;  // per coordinate (m)
   std::string error;  // a candidate the data cannot see (J_φ in span of J_θ)
 };

@@ -33,20 +33,13 @@ std::string progress_line(const FitRecord& r) {
 }
 
 FitOptions fit_options(const Scenario& scenario, const FitArgs& args) {
-  const FitSpec& fit = scenario.fit;
-  FitOptions o;
-  o.start_tolerance_scale = fit_start_tolerance_scale(scenario);
-  o.algorithm = args.algorithm.empty() ? fit.algorithm : args.algorithm;
-  o.gradient.method = parse_gradient_method(args.gradient.empty() ? fit.gradient : args.gradient);
+  FitOptions o = fit_options_of(scenario);
+  if (!args.algorithm.empty()) o.algorithm = args.algorithm;
+  if (!args.gradient.empty()) o.gradient.method = parse_gradient_method(args.gradient);
   if (o.algorithm == "bobyqa") o.gradient.method = GradientMethod::kNone;
-  o.gradient.checkpoint_steps = fit.checkpoint_steps;
-  o.gradient.segment = fit.segment;
   o.gradient.interrupt = &g_interrupted;
-  o.max_evaluations = args.max_evaluations > 0 ? args.max_evaluations : fit.max_evaluations;
-  o.ftol_rel = fit.ftol_rel;
-  o.xtol_rel = fit.xtol_rel;
-  o.max_seconds = args.max_seconds >= 0 ? args.max_seconds : fit.max_seconds;
-  o.smoothness = fit.smoothness;
+  if (args.max_evaluations > 0) o.max_evaluations = args.max_evaluations;
+  if (args.max_seconds >= 0) o.max_seconds = args.max_seconds;
   return o;
 }
 

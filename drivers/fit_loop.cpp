@@ -427,6 +427,23 @@ bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd
   return true;
 }
 
+FitOptions fit_options_of(const Scenario& scenario) {
+  const FitSpec& fit = scenario.fit;
+  FitOptions o;
+  o.start_tolerance_scale = fit_start_tolerance_scale(scenario);
+  o.algorithm = fit.algorithm;
+  o.gradient.method = parse_gradient_method(fit.gradient);
+  if (o.algorithm == "bobyqa") o.gradient.method = GradientMethod::kNone;
+  o.gradient.checkpoint_steps = fit.checkpoint_steps;
+  o.gradient.segment = fit.segment;
+  o.max_evaluations = fit.max_evaluations;
+  o.ftol_rel = fit.ftol_rel;
+  o.xtol_rel = fit.xtol_rel;
+  o.max_seconds = fit.max_seconds;
+  o.smoothness = fit.smoothness;
+  return o;
+}
+
 FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOptions& options) {
   const ParameterMap& map = problem.map();
   const int n = map.size();

@@ -76,6 +76,10 @@ struct FitOutcome {
 /// some algorithms) and far above any real misfit.
 constexpr double kFailedObjective = 1e30;
 
+/// The options a scenario's `fit:` section asks for (algorithm, gradient method,
+/// checkpoints, stopping rules, smoothness, the first stage's tolerances).
+FitOptions fit_options_of(const Scenario& scenario);
+
 FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOptions& options);
 
 /// One point of an L-curve sweep over the smoothness weight γ.

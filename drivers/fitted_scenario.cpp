@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "engine/output.hpp"
+#include "yaml/scenario_paths.hpp"
 #include "yaml/yaml_util.hpp"
 
 namespace kelvin {
@@ -21,13 +22,6 @@ namespace fs = std::filesystem;
 // fitted.yaml reproduces the fitted model bit for bit.
 std::string exact(double v) {
   return fmt::format("{:.17g}", v);
-}
-
-/// The child `key` of a mapping, or an undefined node. A non-const lookup would turn
-/// a null value (`clamps:` with nothing after it) into a mapping, and asking a
-/// missing key's node for its type throws.
-YAML::Node child(const YAML::Node& node, const std::string& key) {
-  return node.IsDefined() && node.IsMap() ? node[key] : YAML::Node(YAML::NodeType::Undefined);
 }
 
 /// A column of fitted-fields.csv: a quantity taken from the model element by element.
@@ -77,41 +71,14 @@ void set_scalar(YAML::Node material, const Scenario& s, const FemModel& model, c
   term[name] = exact(v);
 }
 
-void make_absolute(YAML::Node node, const yamlutil::Doc& d) {
-  if (node.IsDefined() && node.IsScalar())
-    node = fs::absolute(d.resolve(node.Scalar())).lexically_normal().string();
-}
-
-/// Every path-valued key of yaml/SCHEMA.md, since fitted.yaml lives elsewhere.
-void absolute_paths(const YAML::Node& root, const yamlutil::Doc& d) {
-  make_absolute(child(child(root, "mesh"), "file"), d);
-  const YAML::Node material = child(root, "material");
-  make_absolute(child(material, "fields"), d);
-  for (const char* kind : {"elastic", "viscous"}) {
-    const YAML::Node terms = child(material, kind);
-    if (terms.IsDefined() && terms.IsSequence())
-      for (const auto& term : terms) make_absolute(child(term, "plugin"), d);
-    else
-      make_absolute(child(terms, "plugin"), d);
-  }
-  if (const YAML::Node clamps = child(root, "clamps"); clamps.IsDefined() && clamps.IsSequence())
-    for (const auto& clamp : clamps) make_absolute(child(child(clamp, "motion"), "file"), d);
-  const YAML::Node markers = child(root, "markers");
-  make_absolute(child(markers, "rest"), d);  // a list of inline markers stays as it is
-  make_absolute(child(markers, "observed"), d);
-  if (const YAML::Node experiments = child(child(root, "fit"), "experiments");
-      experiments.IsDefined() && experiments.IsSequence())
-    for (const auto& e : experiments) make_absolute(e, d);
-}
-
 }  // namespace
 
 std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& map,
                                   const FemModel& model, const std::string& outdir) {
   const yamlutil::Doc doc(scenario.path);
   YAML::Node root = doc.root();  // a handle: edits change the document's tree
-  absolute_paths(root, doc);
-  YAML::Node material = child(root, "material");
+  absolute_scenario_paths(root, doc);
+  YAML::Node material = yaml_child(root, "material");
   const int ne = model.mesh().num_tets();
 
   // The input's own fields stay in force, now with the model's values (which are the
@@ -176,12 +143,12 @@ std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& 
   }
 
   // The fitted values are now the scenario's, so a further fit starts from them.
-  if (const YAML::Node params = child(child(root, "fit"), "parameters");
+  if (const YAML::Node params = yaml_child(yaml_child(root, "fit"), "parameters");
       params.IsDefined() && params.IsSequence())
     for (auto p : params)
       if (p.IsMap()) p.remove("initial");
   // Without a name the file's stem ("fitted") would rename the outputs.
-  if (!child(root, "name")) root["name"] = scenario.name;
+  if (!yaml_child(root, "name")) root["name"] = scenario.name;
 
   YAML::Emitter out;
   out << root;

@@ -50,6 +50,7 @@ int main(int argc, char** argv) {
   kelvin::register_gradcheck(app, exit_code);
   kelvin::register_fit(app, exit_code);
   kelvin::register_capture(app, exit_code);
+  kelvin::register_diagnose(app, exit_code);
 
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);

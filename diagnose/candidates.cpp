@@ -1,0 +1,214 @@
+#include "diagnose/candidates.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace kelvin {
+namespace {
+
+YAML::Node term(const std::string& model, const std::vector<std::pair<std::string, double>>& p) {
+  YAML::Node t(YAML::NodeType::Map);
+  t["model"] = model;
+  for (const auto& [name, value] : p) t[name] = value;
+  return t;
+}
+
+YAML::Node parameter(const std::string& target, std::optional<double> lower = std::nullopt) {
+  YAML::Node p(YAML::NodeType::Map);
+  p["target"] = target;
+  if (lower) p["lower"] = *lower;
+  return p;
+}
+
+/// A smooth field along the body without its mean (the global parameters carry it).
+YAML::Node legendre_field(const std::string& target, int axis) {
+  YAML::Node p = parameter(target);
+  YAML::Node l(YAML::NodeType::Map);
+  l["axis"] = std::string(1, "xyz"[axis]);
+  l["degree"] = 3;
+  l["from"] = 1;
+  p["scope"]["legendre"] = l;
+  return p;
+}
+
+/// Appends `t` to `list` and returns its index there.
+int append(YAML::Node& list, const YAML::Node& t) {
+  list.push_back(t);
+  return static_cast<int>(list.size()) - 1;
+}
+
+YAML::Node fibre(const Eigen::Vector3d& a) {
+  const Eigen::Vector3d d = a.normalized();
+  return term("fibre", {{"k", 0.0},
+                        {"theta", std::acos(std::clamp(d.z(), -1.0, 1.0))},
+                        {"phi", std::atan2(d.y(), d.x())}});
+}
+
+}  // namespace
+
+BodyAxis body_axis(const Scenario& s) {
+  BodyAxis b;
+  const Eigen::Vector3d lo = s.mesh.nodes.rowwise().minCoeff(),
+                        hi = s.mesh.nodes.rowwise().maxCoeff();
+  (hi - lo).maxCoeff(&b.axis);
+  Eigen::Vector3d clamped = Eigen::Vector3d::Zero();
+  int count = 0;
+  for (const auto& c : s.clamps)
+    for (int n : c.nodes) {
+      clamped += s.mesh.nodes.col(n);
+      ++count;
+    }
+  const double mid = 0.5 * (lo[b.axis] + hi[b.axis]);
+  const bool high = count > 0 && clamped[b.axis] / count > mid;
+  b.clamp_end = high ? hi[b.axis] : lo[b.axis];
+  b.free_end = high ? lo[b.axis] : hi[b.axis];
+  return b;
+}
+
+std::vector<Eigen::Vector3d> screening_directions() {
+  std::vector<Eigen::Vector3d> d = {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
+                                    Eigen::Vector3d::UnitZ()};
+  for (int i = 0; i < 3; ++i)
+    for (double s : {1.0, -1.0}) {
+      Eigen::Vector3d a = Eigen::Vector3d::Zero();
+      a[i] = 1;
+      a[(i + 1) % 3] = s;
+      d.push_back(a.normalized());
+    }
+  for (double sy : {1.0, -1.0})
+    for (double sz : {1.0, -1.0}) d.push_back(Eigen::Vector3d(1, sy, sz).normalized());
+  return d;
+}
+
+const std::vector<std::string>& candidate_ids() {
+  static const std::vector<std::string> ids = {"stiffening",    "damping_law",   "drag",
+                                               "inhomogeneity", "added_mass",    "anisotropy",
+                                               "sync_lag",      "marker_offset", "registration"};
+  return ids;
+}
+
+const std::vector<std::pair<std::string, std::string>>& unavailable_candidates() {
+  static const std::vector<std::pair<std::string, std::string>> u = {
+      {"clamp_compliance",
+       "a compliant clamp (clamped nodes as unknowns held by distributed springs) is not built "
+       "yet"},
+      {"relaxation", "a relaxing (Prony / standard-linear-solid) viscous term is not built yet"},
+      {"discretisation",
+       "judged by a mesh-refinement study (study_coarsening), not screened per case"},
+      {"unnamed", "the learned stress correction is not built yet"}};
+  return u;
+}
+
+std::vector<Candidate> builtin_candidates(const Scenario& s) {
+  std::vector<Candidate> out;
+  const int axis = body_axis(s).axis;
+
+  Candidate stiffening;
+  stiffening.id = "stiffening";
+  stiffening.description = "a Yeoh-like stiffening term c₂ (I₁ − 3 − 2 ln J)²";
+  stiffening.extend = [](const Candidate&, MaterialLists& m, YAML::Node& params, bool) {
+    const int k = append(m.elastic, term("stiffening", {{"c2", 0.0}}));
+    params.push_back(parameter(fmt::format("elastic[{}].c2", k), 0.0));
+  };
+  out.push_back(stiffening);
+
+  const auto& viscous = s.material.viscous;
+  const auto newtonian =
+      std::find_if(viscous.begin(), viscous.end(),
+                   [](const MaterialTermSpec& t) { return t.model == "newtonian"; });
+  if (newtonian != viscous.end()) {
+    Candidate law;
+    law.id = "damping_law";
+    law.description = "a power-law viscosity (flow index h, 1 = the Newtonian nominal)";
+    const int k = static_cast<int>(newtonian - viscous.begin());
+    const double nu = newtonian->params.at("nu");
+    law.extend = [k, nu](const Candidate&, MaterialLists& m, YAML::Node& params, bool) {
+      m.viscous[k] = term("power-law", {{"nu", nu}, {"h", 1.0}});
+      params.push_back(parameter(fmt::format("viscous[{}].h", k)));
+    };
+    out.push_back(law);
+  }
+
+  Candidate drag;
+  drag.id = "drag";
+  drag.description = "a mass-proportional drag force −c ρ v (air drag, Rayleigh α₀)";
+  drag.extend = [](const Candidate&, MaterialLists& m, YAML::Node& params, bool) {
+    const int k = append(m.viscous, term("drag", {{"c", 0.0}}));
+    params.push_back(parameter(fmt::format("viscous[{}].c", k), 0.0));
+  };
+  out.push_back(drag);
+
+  Candidate inhomogeneity;
+  inhomogeneity.id = "inhomogeneity";
+  inhomogeneity.description = "a stiffness that varies along the body (Legendre P₁–P₃ field)";
+  inhomogeneity.extend = [axis](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+    params.push_back(legendre_field(kElasticModuli, axis));
+  };
+  out.push_back(inhomogeneity);
+
+  Candidate mass;
+  mass.id = "added_mass";
+  mass.description = "a density that varies along the body (Legendre P₁–P₃ field)";
+  mass.extend = [axis](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+    params.push_back(legendre_field("density", axis));
+  };
+  out.push_back(mass);
+
+  Candidate anisotropy;
+  anisotropy.id = "anisotropy";
+  anisotropy.description = "a fibre term k/2 (‖F a‖² − 1)² along a direction a";
+  anisotropy.extend = [](const Candidate& self, MaterialLists& m, YAML::Node& params,
+                         bool screening) {
+    if (screening) {
+      for (const auto& a : screening_directions()) {
+        const int k = append(m.elastic, fibre(a));
+        params.push_back(parameter(fmt::format("elastic[{}].k", k), 0.0));
+      }
+      return;
+    }
+    const int k = append(m.elastic, fibre(self.direction));
+    params.push_back(parameter(fmt::format("elastic[{}].k", k), 0.0));
+    params.push_back(parameter(fmt::format("elastic[{}].theta", k)));
+    params.push_back(parameter(fmt::format("elastic[{}].phi", k)));
+  };
+  out.push_back(anisotropy);
+
+  if (!s.markers.observed.names.empty()) {
+    Candidate lag;
+    lag.id = "sync_lag";
+    lag.where = "marker clock";
+    lag.description = "an offset between the marker clock and the clamp log";
+    lag.extend = [](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+      params.push_back(parameter(kClockOffset));
+    };
+    out.push_back(lag);
+  }
+  for (const auto& m : s.markers.embedded) {
+    const auto& names = s.markers.observed.names;
+    if (std::find(names.begin(), names.end(), m.name) == names.end()) continue;
+    Candidate offset;
+    offset.id = "marker_offset";
+    offset.where = m.name;
+    offset.description = fmt::format("marker {} sits away from its given rest position", m.name);
+    const std::string target = fmt::format("markers.{}.offset", m.name);
+    offset.extend = [target](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+      params.push_back(parameter(target));
+    };
+    out.push_back(offset);
+  }
+  if (!s.markers.observed.names.empty()) {
+    Candidate reg;
+    reg.id = "registration";
+    reg.where = "capture frame";
+    reg.description = "a rigid misregistration of the capture frame against the model's";
+    reg.extend = [](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+      params.push_back(parameter(kRegistration));
+    };
+    out.push_back(reg);
+  }
+  return out;
+}
+
+}  // namespace kelvin

@@ -1,0 +1,64 @@
+#pragma once
+/// \file
+/// The built-in candidate effects of the gap diagnosis. Each is a nested extension
+/// of the nominal scenario written as edits of its YAML (terms added to the
+/// material, entries added to fit.parameters), so that an extended model is an
+/// ordinary scenario file: loaded, checked and runnable like any other, and its
+/// refit's fitted.yaml runs in `kelvin simulate`.
+#include <yaml-cpp/yaml.h>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+
+/// The material's term lists as sequences, to which candidates append.
+struct MaterialLists {
+  YAML::Node elastic, viscous;         // sequences of term mappings
+  const MaterialSpec* spec = nullptr;  // the nominal material as loaded
+};
+
+struct Candidate {
+  std::string id;           // stable identifier in diagnosis.json (stiffening, drag, ...)
+  std::string where;        // the marker it concerns ("" = the body or the capture)
+  std::string description;  // one line for the report
+  /// The fibre direction a refit of the anisotropy starts from (screening picks it).
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+  /// Adds the candidate's terms to `material` and its parameter entries (mappings)
+  /// to `parameters`. `screening`: the form scored at the nominal fit (the
+  /// anisotropy's moduli along fixed directions) rather than the one refitted.
+  std::function<void(const Candidate& self, MaterialLists& material, YAML::Node& parameters,
+                     bool screening)>
+      extend;
+};
+
+/// How the body lies: its long axis, and which end the clamps hold.
+struct BodyAxis {
+  int axis = 2;          // 0, 1, 2 = x, y, z
+  double clamp_end = 0;  // coordinate of the clamped end along the axis
+  double free_end = 1;   // coordinate of the other end
+  /// 0 at the clamp, 1 at the free end.
+  double along(const Eigen::Vector3d& x) const {
+    return (x[axis] - clamp_end) / (free_end - clamp_end);
+  }
+};
+BodyAxis body_axis(const Scenario& scenario);
+
+/// Every built-in candidate that applies to `scenario` (a damping law needs a
+/// Newtonian term, a marker offset an observed marker), in a fixed order.
+std::vector<Candidate> builtin_candidates(const Scenario& scenario);
+
+/// Identifiers the diagnosis knows, for the `diagnose.candidates` check; with those
+/// not built yet (no extension for them exists) and why.
+const std::vector<std::string>& candidate_ids();
+const std::vector<std::pair<std::string, std::string>>& unavailable_candidates();
+
+/// The fibre directions the anisotropy is screened along: axes, face and body
+/// diagonals of the frame (13 directions, a⊗a⊗a⊗a spanning 13 of the 15 fully
+/// symmetric fourth-order tensors).
+std::vector<Eigen::Vector3d> screening_directions();
+
+}  // namespace kelvin

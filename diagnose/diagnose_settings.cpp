@@ -1,0 +1,64 @@
+#include "diagnose/diagnose_settings.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <filesystem>
+
+#include "diagnose/candidates.hpp"
+#include "yaml/yaml_util.hpp"
+
+namespace kelvin {
+
+using yamlutil::join;
+
+DiagnoseSettings load_diagnose_settings(const std::string& path) {
+  const yamlutil::Doc d(path);
+  DiagnoseSettings s;
+  const YAML::Node n = d.root()["diagnose"];
+  if (!n || n.IsNull()) return s;
+  const std::string P = "diagnose";
+  d.require_map(n, P);
+  d.check_keys(n, P, {"candidates", "refits", "refit_evaluations", "significance", "validate"});
+  if (const YAML::Node c = n["candidates"]) {
+    d.require_sequence(c, join(P, "candidates"));
+    std::vector<std::string> known = candidate_ids();
+    for (const auto& [id, why] : unavailable_candidates()) known.push_back(id);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      const std::string key = yamlutil::index(join(P, "candidates"), i);
+      const std::string id = d.choice(c[i], key, known);
+      for (const auto& [missing, why] : unavailable_candidates())
+        if (id == missing) d.fail(c[i], key, fmt::format("'{}' cannot be screened: {}", id, why));
+      s.candidates.push_back(id);
+    }
+  }
+  if (const YAML::Node r = n["refits"]) {
+    const long v = d.integer(r, join(P, "refits"));
+    if (v < 0 || v > 20)
+      d.fail(r, join(P, "refits"), fmt::format("must be in [0, 20] (got {})", v));
+    s.refits = static_cast<int>(v);
+  }
+  if (const YAML::Node r = n["refit_evaluations"]) {
+    const long v = d.integer(r, join(P, "refit_evaluations"));
+    if (v < 1 || v > 100000)
+      d.fail(r, join(P, "refit_evaluations"), fmt::format("must be in [1, 100000] (got {})", v));
+    s.refit_evaluations = static_cast<int>(v);
+  }
+  if (const YAML::Node a = n["significance"]) {
+    const double v = d.number(a, join(P, "significance"));
+    if (!(v > 0 && v < 0.5))
+      d.fail(a, join(P, "significance"), fmt::format("must lie in (0, 0.5) (got {:g})", v));
+    s.alpha = v;
+  }
+  if (const YAML::Node v = n["validate"]) {
+    d.require_sequence(v, join(P, "validate"));
+    for (std::size_t i = 0; i < v.size(); ++i)
+      s.validate.push_back(
+          std::filesystem::absolute(d.existing_file(v[i], yamlutil::index(join(P, "validate"), i)))
+              .lexically_normal()
+              .string());
+  }
+  return s;
+}
+
+}  // namespace kelvin

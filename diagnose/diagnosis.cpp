@@ -1,0 +1,583 @@
+#include "diagnose/diagnosis.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <sstream>
+
+#include "adjoint/fit_problem.hpp"
+#include "adjoint/uncertainty.hpp"
+#include "diagnose/extended_scenario.hpp"
+#include "drivers/fit_loop.hpp"
+#include "drivers/fitted_scenario.hpp"
+#include "engine/error.hpp"
+#include "engine/output.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// One loaded scenario file and its fit problem (the scenario must outlive it).
+struct Model {
+  std::unique_ptr<Scenario> scenario;
+  std::unique_ptr<FitProblem> problem;
+  ExtendedScenario extended;
+};
+
+Model load_model(const std::string& source, const Scenario& nominal,
+                 const std::vector<const Candidate*>& with, bool screening, const std::string& path,
+                 int refit_form = -1) {
+  Model m;
+  m.extended = write_extended_scenario(source, nominal, with, screening, path, refit_form);
+  m.scenario = std::make_unique<Scenario>(load_scenario(path));
+  m.problem = std::make_unique<FitProblem>(*m.scenario, m.scenario->fit.parameters);
+  return m;
+}
+
+std::vector<int> entries_of(const Model& m, const std::vector<int>& specs) {
+  std::vector<int> out;
+  for (int k : specs) {
+    const auto e = m.problem->map().entries_of_spec(k);
+    out.insert(out.end(), e.begin(), e.end());
+  }
+  return out;
+}
+
+MisfitFigures misfit(FitProblem& problem, const Eigen::VectorXd& p,
+                     const std::atomic<bool>* interrupt) {
+  MisfitFigures f;
+  const GaussNewtonSystem g = gauss_newton_system(problem, p, interrupt, false);
+  if (!g.ok) {
+    f.error = g.error;
+    return f;
+  }
+  f.ok = true;
+  f.residual = g.residual;
+  f.samples = static_cast<int>(g.residual.size());
+  f.sum_sq = g.residual.squaredNorm();
+  f.rms = f.samples ? std::sqrt(f.sum_sq / f.samples) : 0;
+  return f;
+}
+
+/// Saved parameters of a finished fit: `label,value` lines (optimiser space).
+void save_parameters(const std::string& path, const ParameterMap& map, const Eigen::VectorXd& p) {
+  std::string csv = "label,value\n";
+  for (int j = 0; j < map.size(); ++j) csv += fmt::format("{},{:.17g}\n", map.label(j), p[j]);
+  write_file_atomic(path, csv);
+}
+
+/// The saved parameters when they are for this map, else empty.
+Eigen::VectorXd load_parameters(const std::string& path, const ParameterMap& map) {
+  std::ifstream in(path);
+  if (!in) return {};
+  std::string line;
+  std::getline(in, line);
+  Eigen::VectorXd p(map.size());
+  int j = 0;
+  while (std::getline(in, line)) {
+    const auto comma = line.rfind(',');
+    if (comma == std::string::npos || j >= map.size() || line.substr(0, comma) != map.label(j))
+      return {};
+    try {
+      p[j++] = std::stod(line.substr(comma + 1));
+    } catch (const std::exception&) {
+      return {};
+    }
+  }
+  if (j != map.size() || !p.allFinite()) return {};
+  return p;
+}
+
+struct FitRun {
+  Eigen::VectorXd p;
+  int evaluations = 0;
+  bool ok = false, resumed = false;
+  std::string error;
+};
+
+FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
+                 const DiagnoseOptions& o, const std::string& label, int max_evaluations = 0) {
+  FitRun run;
+  const ParameterMap& map = m.problem->map();
+  if (o.resume) {
+    run.p = load_parameters(state, map);
+    if (run.p.size() == map.size()) {
+      run.ok = run.resumed = true;
+      if (o.progress) o.progress(fmt::format("  {}: resumed from {}", label, state));
+      return run;
+    }
+  }
+  FitOptions f = fit_options_of(*m.scenario);
+  f.gradient.interrupt = o.interrupt;
+  if (max_evaluations > 0) f.max_evaluations = max_evaluations;
+  if (o.max_evaluations > 0) f.max_evaluations = o.max_evaluations;
+  f.on_evaluation = [&](const FitRecord& r) {
+    if (o.progress && r.accepted)
+      o.progress(fmt::format("  {}: eval {:3d}  rms {:8.4f} mm  {:7.1f} s", label, r.evaluation,
+                             r.rms * 1e3, r.seconds));
+  };
+  const FitOutcome out = run_fit(*m.problem, p0, f);
+  run.evaluations = out.evaluations;
+  if (!out.best.evaluation) {
+    run.error = out.history.empty() ? out.stop_reason : out.history.back().error;
+    return run;
+  }
+  run.p = out.p;
+  run.ok = true;
+  if (!out.interrupted) save_parameters(state, map, run.p);
+  return run;
+}
+
+std::vector<NamedValue> named_values(const ParameterMap& map, const Eigen::VectorXd& p,
+                                     const std::vector<int>& entries,
+                                     const ParameterUncertainty* u = nullptr) {
+  std::vector<NamedValue> out;
+  for (int j : entries) {
+    NamedValue v;
+    v.name = map.label(j);
+    v.value = map.value(p, j);
+    if (u && u->ok) v.std_error = u->std_error[j];
+    out.push_back(v);
+  }
+  return out;
+}
+
+std::vector<int> range(int n) {
+  std::vector<int> v(n);
+  for (int k = 0; k < n; ++k) v[k] = k;
+  return v;
+}
+
+/// Standard normal upper quantile z with P(Z > z) = p, from the χ²(1) quantile.
+double normal_quantile(double p) {
+  return std::sqrt(chi_square_quantile(2 * p, 1));
+}
+
+/// Where a fitted field of the refit differs most from the nominal material: the
+/// part of the body (by distance from the clamp) where |ln(q / q₀)| exceeds half its
+/// largest value, q the density or the first elastic modulus.
+std::string field_region(const Model& m, const Eigen::VectorXd& p, const Scenario& nominal,
+                         bool density, const BodyAxis& axis) {
+  FemModel& model = m.problem->experiment(0).model();
+  m.problem->map().apply(p, model);
+  const Mesh& mesh = model.mesh();
+  constexpr int kBins = 20;
+  std::vector<double> sum(kBins, 0);
+  std::vector<int> count(kBins, 0);
+  const double q0 = density ? nominal.material.density
+                    : nominal.material.elastic[0].params.count("mu")
+                        ? nominal.material.elastic[0].params.at("mu")
+                        : nominal.material.elastic[0].params.begin()->second;
+  const int index = [&] {
+    if (density) return 0;
+    const auto& params = model.terms()[0].model->params();
+    for (std::size_t k = 0; k < params.size(); ++k)
+      if (params[k].name == "mu") return static_cast<int>(k);
+    return 0;
+  }();
+  for (int e = 0; e < mesh.num_tets(); ++e) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int a = 0; a < 4; ++a) c += 0.25 * mesh.nodes.col(mesh.tets(a, e));
+    const int b = std::clamp(static_cast<int>(axis.along(c) * kBins), 0, kBins - 1);
+    const double q = density ? model.density()[e] : model.terms()[0].q(index, e);
+    sum[b] += std::log(q / q0);
+    ++count[b];
+  }
+  double big = 0;
+  for (int b = 0; b < kBins; ++b)
+    if (count[b]) big = std::max(big, std::abs(sum[b] / count[b]));
+  double u0 = 1, u1 = 0;
+  for (int b = 0; b < kBins; ++b)
+    if (count[b] && std::abs(sum[b] / count[b]) > 0.5 * big) {
+      u0 = std::min(u0, double(b) / kBins);
+      u1 = std::max(u1, double(b + 1) / kBins);
+    }
+  if (u1 <= 0.25) return "clamp zone";
+  if (u0 >= 0.75) return "free end";
+  if (u1 <= 0.6) return "clamp half";
+  if (u0 >= 0.4) return "free half";
+  return "whole body";
+}
+
+std::string slug(const Candidate& c) {
+  std::string s = c.id;
+  if (!c.where.empty() && c.id == "marker_offset") s += "-" + c.where;
+  return s;
+}
+
+}  // namespace
+
+Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
+                        const DiagnoseOptions& o) {
+  Diagnosis d;
+  d.scenario = fs::absolute(path).lexically_normal().string();
+  d.outdir = outdir;
+  d.settings = load_diagnose_settings(d.scenario);
+  const auto say = [&](const std::string& line) {
+    if (o.progress) o.progress(line);
+  };
+  const auto stopped = [&] { return o.interrupt && o.interrupt->load(); };
+  const fs::path out(outdir), state = out / "state", models = out / "models";
+  fs::create_directories(state);
+  fs::create_directories(models);
+
+  const Scenario nominal = load_scenario(d.scenario);
+  if (!nominal.fit.present)
+    throw Error(
+        fmt::format("{}: a diagnosis needs a fit section (the nominal parameters to fit "
+                    "and, optionally, fit.experiments)",
+                    d.scenario));
+  const BodyAxis axis = body_axis(nominal);
+  for (auto& c : builtin_candidates(nominal))
+    if (d.settings.candidates.empty() ||
+        std::find(d.settings.candidates.begin(), d.settings.candidates.end(), c.id) !=
+            d.settings.candidates.end())
+      d.candidates.push_back(c);
+  if (d.candidates.empty())
+    throw Error(
+        fmt::format("{}: diagnose.candidates: none of them applies to this scenario", d.scenario));
+
+  // ---- 1. Nominal fit ---------------------------------------------------------
+  auto t0 = Clock::now();
+  say(fmt::format("stage 1: nominal fit of {} ({} candidates to screen afterwards)", nominal.name,
+                  d.candidates.size()));
+  Model base = load_model(d.scenario, nominal, {}, false, (models / "nominal.yaml").string());
+  const ParameterMap& base_map = base.problem->map();
+  const FitRun nominal_fit =
+      fit_model(base, base_map.initial(), (state / "nominal.csv").string(), o, "nominal");
+  if (!nominal_fit.ok) throw Error(fmt::format("the nominal fit failed: {}", nominal_fit.error));
+  const Eigen::VectorXd p_nominal = nominal_fit.p;
+  d.nominal_evaluations = nominal_fit.evaluations;
+  d.nominal_parameters = named_values(base_map, p_nominal, range(base_map.size()));
+  d.seconds.nominal_fit = since(t0);
+  if (stopped()) {
+    d.interrupted = true;
+    return d;
+  }
+
+  // ---- 2./3. Screening at the nominal fit --------------------------------------
+  t0 = Clock::now();
+  std::vector<const Candidate*> all;
+  for (const auto& c : d.candidates) all.push_back(&c);
+  say(fmt::format("stage 2: residual and screening of {} candidates at the nominal fit",
+                  all.size()));
+  Model screen = load_model(d.scenario, nominal, all, true, (models / "screening.yaml").string());
+  const ParameterMap& smap = screen.problem->map();
+  const int n_nominal = base_map.size();
+  for (int j = 0; j < n_nominal; ++j)
+    if (smap.label(j) != base_map.label(j))
+      throw Error(
+          fmt::format("internal: the screening model's parameter {} is '{}', the "
+                      "nominal's '{}'",
+                      j, smap.label(j), base_map.label(j)));
+  Eigen::VectorXd p_screen = smap.initial();
+  p_screen.head(n_nominal) = p_nominal;
+  const GaussNewtonSystem g = gauss_newton_system(*screen.problem, p_screen, o.interrupt);
+  if (!g.ok) throw Error(fmt::format("the screening run failed: {}", g.error));
+  d.noise = estimate_noise(g.residual, g.samples);
+  d.nominal_train.ok = true;
+  d.nominal_train.residual = g.residual;
+  d.nominal_train.samples = static_cast<int>(g.residual.size());
+  d.nominal_train.sum_sq = g.residual.squaredNorm();
+  d.nominal_train.rms = std::sqrt(d.nominal_train.sum_sq / std::max(1, d.nominal_train.samples));
+  d.nominal_samples = g.samples;
+  d.marker_names = screen.problem->experiment(0).objective().names();
+  d.where = locate_residual(*screen.problem, g.residual, g.samples, axis, d.noise.sigma);
+  say(
+      fmt::format("  nominal rms {:.4f} mm per coordinate; noise {:.4f} mm (from {} third "
+                  "differences)",
+                  d.nominal_train.rms * 1e3, d.noise.sigma * 1e3, d.noise.differences));
+
+  std::vector<std::pair<std::string, std::vector<int>>> groups;
+  ScreeningOptions so;
+  so.noise_variance = d.noise.sigma * d.noise.sigma;
+  const Eigen::VectorXd lo = smap.lower(), start = smap.initial();
+  for (std::size_t c = 0; c < all.size(); ++c) {
+    const std::vector<int> e = entries_of(screen, screen.extended.candidate_specs[c]);
+    groups.emplace_back(slug(*all[c]), e);
+    for (int j : e)
+      if (lo[j] == start[j]) so.nonnegative.push_back(j);
+  }
+  d.ranking =
+      rank_candidates(g.residual, g.jacobian, range(n_nominal), groups, so, d.settings.alpha);
+  // The anisotropy is refitted along the screened direction that explains most,
+  // from that direction's Gauss–Newton step.
+  std::map<int, CandidateScore> start_scores;
+  for (std::size_t c = 0; c < all.size(); ++c) {
+    if (d.candidates[c].id != "anisotropy") continue;
+    std::vector<std::pair<std::string, std::vector<int>>> single;
+    for (int j : groups[c].second) single.push_back({smap.label(j), {j}});
+    const auto s = score_candidates(g.residual, g.jacobian, range(n_nominal), single, so);
+    int best = 0;
+    for (std::size_t k = 1; k < s.size(); ++k)
+      if (s[k].predicted_drop > s[best].predicted_drop) best = static_cast<int>(k);
+    d.candidates[c].direction = screening_directions()[best];
+    start_scores[static_cast<int>(c)] = s[best];
+  }
+  d.seconds.screening = since(t0);
+  for (const auto& rc : d.ranking.order)
+    say(fmt::format(
+        "  {:<22} LM {:10.1f}  (threshold {:7.1f}, dof {})  predicted rms "
+        "{:.4f} mm{}",
+        groups[rc.candidate].first, rc.marginal.statistic, rc.threshold, rc.marginal.dof,
+        rc.marginal.predicted_rms * 1e3, rc.significant ? "  significant" : ""));
+  if (stopped()) {
+    d.interrupted = true;
+    return d;
+  }
+
+  // Held-out figures of the nominal model.
+  auto th = Clock::now();
+  std::vector<Model> heldout_nominal;
+  for (std::size_t k = 0; k < d.settings.validate.size(); ++k) {
+    Model h = load_model(d.settings.validate[k], nominal, {}, false,
+                         (models / fmt::format("heldout{}-nominal.yaml", k)).string());
+    if (h.problem->map().size() != n_nominal)
+      throw Error(
+          fmt::format("{}: its parameters do not match the training scenario's "
+                      "(another mesh or markers?)",
+                      d.settings.validate[k]));
+    HeldOutFigures f;
+    f.path = d.settings.validate[k];
+    f.before = misfit(*h.problem, p_nominal, o.interrupt);
+    if (!f.before.ok) throw Error(fmt::format("{}: {}", f.path, f.before.error));
+    say(fmt::format("  held-out {}: nominal rms {:.4f} mm", fs::path(f.path).filename().string(),
+                    f.before.rms * 1e3));
+    d.nominal_heldout.push_back(f);
+  }
+  d.seconds.heldout += since(th);
+
+  // ---- 3. Refits of the top candidates ----------------------------------------
+  t0 = Clock::now();
+  const int m = static_cast<int>(groups.size());
+  const double sigma2 = d.noise.sigma * d.noise.sigma;
+  const double N = d.nominal_train.samples;
+  std::vector<int> order;
+  for (const auto& rc : d.ranking.order) order.push_back(rc.candidate);
+  // Refit by the marginal statistic: the greedy order credits an effect once, but
+  // which of two confounded ones to refit is the refit's question.
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    const auto& sa =
+        std::find_if(d.ranking.order.begin(), d.ranking.order.end(), [&](const RankedCandidate& r) {
+          return r.candidate == a;
+        })->marginal;
+    const auto& sb =
+        std::find_if(d.ranking.order.begin(), d.ranking.order.end(), [&](const RankedCandidate& r) {
+          return r.candidate == b;
+        })->marginal;
+    const double ma =
+        sa.error.empty() ? sa.statistic / chi_square_quantile(0.01, std::max(1, sa.dof)) : -1;
+    const double mb =
+        sb.error.empty() ? sb.statistic / chi_square_quantile(0.01, std::max(1, sb.dof)) : -1;
+    return ma > mb;
+  });
+  const int K = std::min<int>(d.settings.refits, static_cast<int>(order.size()));
+  say(fmt::format("stage 3: refits of the top {} candidates", K));
+  for (int r = 0; r < K && !stopped(); ++r) {
+    const int c = order[r];
+    const Candidate& cand = d.candidates[c];
+    const CandidateScore& score =
+        start_scores.count(c)
+            ? start_scores.at(c)
+            : std::find_if(d.ranking.order.begin(), d.ranking.order.end(),
+                           [&](const RankedCandidate& x) { return x.candidate == c; })
+                  ->marginal;
+    RefitResult res;
+    res.candidate = c;
+    const std::string name = slug(cand);
+    Model model =
+        load_model(d.scenario, nominal, {&cand}, false, (models / (name + ".yaml")).string());
+    const ParameterMap& map = model.problem->map();
+    const std::vector<int> entries = entries_of(model, model.extended.candidate_specs[0]);
+    res.dof = static_cast<int>(entries.size());
+    // Start at the joint Gauss–Newton step of screening: the effect and the nominal
+    // parameters that compensated for its absence (a clock lag fitted as viscosity).
+    Eigen::VectorXd p0 = map.initial();
+    p0.head(n_nominal) = p_nominal;
+    if (score.fitted_step.size() == n_nominal) p0.head(n_nominal) += score.fitted_step;
+    const Eigen::VectorXd lower = map.lower(), upper = map.upper();
+    if (cand.id == "anisotropy") {
+      if (score.step.size() == 1) p0[entries[0]] = score.step[0];
+    } else if (entries.size() == groups[c].second.size()) {
+      for (std::size_t a = 0; a < score.active.size(); ++a) {
+        const long k =
+            std::find(groups[c].second.begin(), groups[c].second.end(), score.active[a]) -
+            groups[c].second.begin();
+        p0[entries[k]] += score.step[a];
+      }
+    }
+    p0 = p0.cwiseMax(lower).cwiseMin(upper);
+    FitRun fit = fit_model(model, p0, (state / (name + ".csv")).string(), o, name,
+                           d.settings.refit_evaluations);
+    if (!fit.ok && !stopped()) {
+      // The linearised start may lie where the model cannot run: from the nominal.
+      Eigen::VectorXd p1 = map.initial();
+      p1.head(n_nominal) = p_nominal;
+      fit = fit_model(model, p1, (state / (name + ".csv")).string(), o, name,
+                      d.settings.refit_evaluations);
+    }
+    res.evaluations = fit.evaluations;
+    if (!fit.ok) {
+      res.error = fit.error;
+      d.refits.push_back(res);
+      continue;
+    }
+    res.train = misfit(*model.problem, fit.p, o.interrupt);
+    if (!res.train.ok) {
+      res.error = res.train.error;
+      d.refits.push_back(res);
+      continue;
+    }
+    res.ok = true;
+    res.statistic = (d.nominal_train.sum_sq - res.train.sum_sq) / sigma2;
+    res.threshold = chi_square_quantile(d.settings.alpha / m, std::max(1, res.dof));
+    res.bic = res.train.sum_sq / sigma2 + (n_nominal + res.dof) * std::log(N);
+    res.passes_training = res.statistic > res.threshold;
+    res.parameters = named_values(map, fit.p, entries);
+    res.p = fit.p;
+    for (int j = 0; j < map.size(); ++j) res.labels.push_back(map.label(j));
+    if (cand.id == "marker_offset" || cand.id == "sync_lag" || cand.id == "registration")
+      res.where = cand.where;
+    else if (cand.id == "inhomogeneity" || cand.id == "added_mass")
+      res.where = field_region(model, fit.p, nominal, cand.id == "added_mass", axis);
+    const fs::path dir = out / "refits" / name;
+    model.problem->map().apply(fit.p, model.problem->experiment(0).model());
+    res.fitted_yaml = write_fitted_scenario(*model.scenario, map,
+                                            model.problem->experiment(0).model(), dir.string());
+    // Held-out motions.
+    th = Clock::now();
+    double spread = 0;
+    for (std::size_t k = 0; k < d.settings.validate.size() && !stopped(); ++k) {
+      Model h = load_model(d.settings.validate[k], nominal, {&cand}, false,
+                           (models / fmt::format("heldout{}-{}.yaml", k, name)).string());
+      HeldOutFigures f = d.nominal_heldout[k];
+      if (h.problem->map().size() != map.size()) {
+        f.after.error = "its parameters do not match the training scenario's";
+      } else {
+        f.after = misfit(*h.problem, fit.p, o.interrupt);
+      }
+      if (f.after.ok && f.after.samples == f.before.samples) {
+        res.heldout_drop += f.before.sum_sq - f.after.sum_sq;
+        spread += (f.after.residual - f.before.residual).squaredNorm();
+      }
+      res.heldout.push_back(f);
+    }
+    d.seconds.heldout += since(th);
+    res.heldout_threshold =
+        2 * normal_quantile(d.settings.alpha / m) * d.noise.sigma * std::sqrt(spread);
+    res.passes_heldout = !res.heldout.empty() && res.heldout_drop > res.heldout_threshold;
+    double after = 0, before = 0;
+    for (const auto& f : res.heldout) {
+      before += f.before.sum_sq;
+      after += f.after.ok ? f.after.sum_sq : f.before.sum_sq;
+    }
+    say(fmt::format("  {}: train rms {:.4f} → {:.4f} mm (LR {:.1f}, threshold {:.1f}){}", name,
+                    d.nominal_train.rms * 1e3, res.train.rms * 1e3, res.statistic, res.threshold,
+                    res.heldout.empty()
+                        ? std::string()
+                        : fmt::format("; held-out ‖r‖² {:.4g} → {:.4g} mm² (needs a drop > "
+                                      "{:.3g})",
+                                      before * 1e6, after * 1e6, res.heldout_threshold * 1e6)));
+    d.refits.push_back(res);
+  }
+  d.seconds.refits = since(t0) - 0;
+
+  // ---- Verdict -------------------------------------------------------------------
+  const bool judged_on_heldout = !d.settings.validate.empty();
+  for (int r = 0; r < static_cast<int>(d.refits.size()); ++r) {
+    const RefitResult& x = d.refits[r];
+    if (!x.ok || !x.passes_training || (judged_on_heldout && !x.passes_heldout)) continue;
+    if (d.accepted < 0) {
+      d.accepted = r;
+      continue;
+    }
+    const RefitResult& y = d.refits[d.accepted];
+    if (judged_on_heldout ? x.heldout_drop > y.heldout_drop : x.bic < y.bic) d.accepted = r;
+  }
+  if (d.accepted >= 0) {
+    const RefitResult& a = d.refits[d.accepted];
+    d.effect = d.candidates[a.candidate].id;
+    d.fitted_yaml = a.fitted_yaml;
+    std::string where = a.where;
+    if (where.empty()) {
+      // The region whose markers carry most of the model's residual.
+      const RegionResidual* worst = nullptr;
+      for (const auto& reg : d.where.regions)
+        if (!worst || reg.excess > worst->excess) worst = &reg;
+      if (worst) where = worst->name;
+    }
+    if (!where.empty()) d.verdict_where.push_back(where);
+    // Screen again with the accepted effect in the model, at its refit.
+    if (!stopped()) {
+      t0 = Clock::now();
+      say(fmt::format("stage 4: screening again with {} in the model", d.effect));
+      std::vector<const Candidate*> with = {&d.candidates[a.candidate]};
+      std::vector<int> others;
+      for (int c = 0; c < static_cast<int>(d.candidates.size()); ++c)
+        if (c != a.candidate) {
+          with.push_back(&d.candidates[c]);
+          others.push_back(c);
+        }
+      Model again = load_model(d.scenario, nominal, with, true,
+                               (models / "screening-with-effect.yaml").string(), 0);
+      const ParameterMap& amap = again.problem->map();
+      const int n_fixed = static_cast<int>(a.p.size());
+      bool same = amap.size() >= n_fixed;
+      for (int j = 0; same && j < n_fixed; ++j) same = amap.label(j) == a.labels[j];
+      if (!same) throw Error("internal: the second screening's parameters differ from the refit's");
+      Eigen::VectorXd p2 = amap.initial();
+      p2.head(n_fixed) = a.p;
+      const GaussNewtonSystem g2 = gauss_newton_system(*again.problem, p2, o.interrupt);
+      if (g2.ok) {
+        std::vector<std::pair<std::string, std::vector<int>>> groups2;
+        ScreeningOptions so2;
+        so2.noise_variance = sigma2;
+        const Eigen::VectorXd lo2 = amap.lower(), start2 = amap.initial();
+        for (std::size_t k = 0; k < others.size(); ++k) {
+          const std::vector<int> e = entries_of(again, again.extended.candidate_specs[k + 1]);
+          groups2.emplace_back(slug(d.candidates[others[k]]), e);
+          for (int j : e)
+            if (lo2[j] == start2[j]) so2.nonnegative.push_back(j);
+        }
+        d.second_ranking = rank_candidates(g2.residual, g2.jacobian, range(n_fixed), groups2, so2,
+                                           d.settings.alpha);
+        for (auto& rc : d.second_ranking.order) rc.candidate = others[rc.candidate];
+        for (auto& c : d.second_ranking.confounded) {
+          c.a = others[c.a];
+          c.b = others[c.b];
+        }
+        if (!d.second_ranking.order.empty() && d.second_ranking.order[0].significant)
+          d.second_candidate = d.second_ranking.order[0].candidate;
+        for (const auto& rc : d.second_ranking.order)
+          say(fmt::format("  {:<22} LM {:10.1f}  (threshold {:7.1f}){}",
+                          slug(d.candidates[rc.candidate]), rc.marginal.statistic, rc.threshold,
+                          rc.significant ? "  significant" : ""));
+      } else {
+        say(fmt::format("  the second screening failed: {}", g2.error));
+      }
+      d.seconds.second_screening = since(t0);
+    }
+  } else {
+    // The nominal model is the answer: its fitted scenario is the one to run.
+    FemModel& model = base.problem->experiment(0).model();
+    base_map.apply(p_nominal, model);
+    d.fitted_yaml =
+        write_fitted_scenario(*base.scenario, base_map, model, (out / "nominal").string());
+  }
+  d.interrupted = stopped();
+  return d;
+}
+
+}  // namespace kelvin

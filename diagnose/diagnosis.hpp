@@ -1,0 +1,118 @@
+#pragma once
+/// \file
+/// `kelvin diagnose`: the sim-to-real gap of a nominal model, in stages.
+///  1. Nominal fit on the training experiments; the noise level from the residual's
+///     fast part (diagnose/noise).
+///  2. Where: residual tables per marker, window, band and region (diagnose/where).
+///  3. Which: every candidate effect (diagnose/candidates) scored at the nominal fit
+///     from one forward-sensitivity solve, ranked greedily (diagnose/ranking), the top
+///     ones refitted with the nominal parameters free and checked on held-out motions.
+///  4. How far: training and held-out RMS before and after, the effect's parameters
+///     with standard errors.
+/// An effect is named when its refit clears a likelihood-ratio test against the
+/// estimated noise on the training data and, when held-out motions are given, lowers
+/// their misfit by more than the noise can explain; otherwise the verdict is `none`.
+#include <Eigen/Core>
+#include <atomic>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "diagnose/candidates.hpp"
+#include "diagnose/diagnose_settings.hpp"
+#include "diagnose/noise.hpp"
+#include "diagnose/ranking.hpp"
+#include "diagnose/where.hpp"
+
+namespace kelvin {
+
+struct NamedValue {
+  std::string name;
+  double value = 0, std_error = NAN;  // model units
+};
+
+/// Misfit of one model on one set of experiments at the capture frames.
+struct MisfitFigures {
+  bool ok = false;
+  std::string error;
+  double rms = 0;     // per coordinate (m)
+  double sum_sq = 0;  // ‖r‖² (m²)
+  int samples = 0;
+  Eigen::VectorXd residual;  // for comparisons between models on the same samples
+};
+
+struct HeldOutFigures {
+  std::string path;
+  MisfitFigures before, after;
+};
+
+struct RefitResult {
+  int candidate = -1;  // index into Diagnosis::candidates
+  bool ok = false;
+  std::string error;
+  int evaluations = 0;
+  double seconds = 0;
+  MisfitFigures train;   // after (the nominal's is Diagnosis::nominal_train)
+  double statistic = 0;  // (‖r₀‖² − ‖r‖²) / σ̂²: likelihood ratio, known noise
+  double threshold = 0;  // χ²(dof) quantile at α / refits
+  int dof = 0;
+  double bic = 0;  // ‖r‖²/σ̂² + k ln N, k counting the nominal's too
+  std::vector<HeldOutFigures> heldout;
+  double heldout_drop = 0;       // Σ (‖h₀‖² − ‖h‖²) (m²)
+  double heldout_threshold = 0;  // z σ̂ ‖h − h₀‖·2: what noise alone could give
+  bool passes_training = false, passes_heldout = false;
+  std::string where;  // marker, or region of a field's largest change
+  std::vector<NamedValue> parameters;
+  std::string fitted_yaml;          // the refitted scenario, runnable by `kelvin simulate`
+  Eigen::VectorXd p;                // refitted parameters (optimiser space)
+  std::vector<std::string> labels;  // of p
+};
+
+struct StageTimes {
+  double nominal_fit = 0, screening = 0, refits = 0, heldout = 0, second_screening = 0;
+};
+
+struct Diagnosis {
+  std::string scenario, outdir;
+  DiagnoseSettings settings;
+  std::vector<Candidate> candidates;
+  // Stage 1
+  int nominal_evaluations = 0;
+  std::vector<NamedValue> nominal_parameters;
+  MisfitFigures nominal_train;
+  std::vector<ResidualSample> nominal_samples;  // of nominal_train.residual
+  std::vector<std::string> marker_names;        // the training objective's markers
+  std::vector<HeldOutFigures> nominal_heldout;
+  NoiseEstimate noise;
+  // Stage 2
+  ResidualTables where;
+  // Stage 3
+  Ranking ranking;
+  std::vector<RefitResult> refits;
+  // Verdict
+  std::string effect = "none";
+  std::vector<std::string> verdict_where;
+  int accepted = -1;  // index into refits
+  /// Screening again with the accepted effect in the model (at its refit): the
+  /// first significant candidate there is a second effect.
+  Ranking second_ranking;
+  int second_candidate = -1;
+  std::string fitted_yaml;  // of the accepted model (the nominal one when none)
+  bool interrupted = false;
+  StageTimes seconds;
+};
+
+struct DiagnoseOptions {
+  bool resume = false;
+  int max_evaluations = 0;  // per fit; 0 = the scenario's
+  const std::atomic<bool>* interrupt = nullptr;
+  std::function<void(const std::string&)> progress;
+};
+
+/// Runs every stage; throws kelvin::Error on bad input. Intermediate results (the
+/// nominal and refitted parameters) are kept in outdir/state so that --resume
+/// skips what is done.
+Diagnosis run_diagnosis(const std::string& scenario_path, const std::string& outdir,
+                        const DiagnoseOptions& options);
+
+}  // namespace kelvin

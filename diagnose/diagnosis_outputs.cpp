@@ -1,0 +1,431 @@
+#include "diagnose/diagnosis_outputs.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+
+#include "drivers/svg_plot.hpp"
+#include "engine/output.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      out += fmt::format("\\u{:04x}", c);
+    } else {
+      out += c;
+    }
+  }
+  return out + "\"";
+}
+
+std::string json_number(double v) {
+  return std::isfinite(v) ? fmt::format("{:.10g}", v) : "null";
+}
+
+std::string json_strings(const std::vector<std::string>& v) {
+  std::string s = "[";
+  for (std::size_t k = 0; k < v.size(); ++k) s += (k ? ", " : "") + json_string(v[k]);
+  return s + "]";
+}
+
+std::string json_values(const std::vector<NamedValue>& v) {
+  std::string s = "[";
+  for (std::size_t k = 0; k < v.size(); ++k)
+    s += fmt::format("{}{{\"name\": {}, \"value\": {}, \"std_error\": {}}}", k ? ", " : "",
+                     json_string(v[k].name), json_number(v[k].value), json_number(v[k].std_error));
+  return s + "]";
+}
+
+std::string candidate_name(const Diagnosis& d, int c) {
+  const Candidate& x = d.candidates[c];
+  return x.id == "marker_offset" ? x.id + ":" + x.where : x.id;
+}
+
+double heldout_rms(const std::vector<HeldOutFigures>& h, bool after) {
+  double sq = 0;
+  int n = 0;
+  for (const auto& f : h) {
+    const MisfitFigures& m = after && f.after.ok ? f.after : f.before;
+    sq += m.sum_sq;
+    n += m.samples;
+  }
+  return n ? std::sqrt(sq / n) : NAN;
+}
+
+std::string diagnosis_json(const Diagnosis& d) {
+  std::string j = "{\n";
+  auto out = std::back_inserter(j);
+  fmt::format_to(out, "  \"scenario\": {},\n  \"interrupted\": {},\n", json_string(d.scenario),
+                 d.interrupted ? "true" : "false");
+  fmt::format_to(
+      out, "  \"verdict\": {{\"effect\": {}, \"where\": {}, \"second\": {}}},\n",
+      json_string(d.effect), json_strings(d.verdict_where),
+      d.second_candidate >= 0 ? json_string(candidate_name(d, d.second_candidate)) : "null");
+  fmt::format_to(out, "  \"noise\": {{\"sigma\": {}, \"third_differences\": {}, \"rms\": {}}},\n",
+                 json_number(d.noise.sigma), d.noise.differences, json_number(d.noise.naive));
+  fmt::format_to(out,
+                 "  \"nominal\": {{\"evaluations\": {}, \"parameters\": {}, \"train_rms\": {}, "
+                 "\"heldout_rms\": {}}},\n",
+                 d.nominal_evaluations, json_values(d.nominal_parameters),
+                 json_number(d.nominal_train.rms),
+                 json_number(heldout_rms(d.nominal_heldout, false)));
+  // Where.
+  j += "  \"where\": {\n    \"markers\": [";
+  for (std::size_t k = 0; k < d.where.markers.size(); ++k) {
+    const auto& m = d.where.markers[k];
+    fmt::format_to(
+        out,
+        "{}\n      {{\"name\": {}, \"region\": {}, \"along\": {}, \"rms\": [{}, {}, {}], "
+        "\"rms_total\": {}, \"excess\": {}, \"gain\": {}, \"delay\": {}, "
+        "\"main_axis\": \"{}\"}}",
+        k ? "," : "", json_string(m.name), json_string(m.region), json_number(m.along),
+        json_number(m.rms[0]), json_number(m.rms[1]), json_number(m.rms[2]),
+        json_number(m.rms_total), json_number(m.excess), json_number(m.gain), json_number(m.delay),
+        "xyz"[m.main_axis]);
+  }
+  j += "],\n    \"windows\": [";
+  for (std::size_t k = 0; k < d.where.windows.size(); ++k)
+    fmt::format_to(out, "{}{{\"t0\": {}, \"t1\": {}, \"rms\": {}}}", k ? ", " : "",
+                   json_number(d.where.windows[k].t0), json_number(d.where.windows[k].t1),
+                   json_number(d.where.windows[k].rms));
+  j += "],\n    \"bands\": [";
+  for (std::size_t k = 0; k < d.where.bands.size(); ++k)
+    fmt::format_to(
+        out, "{}{{\"f0\": {}, \"f1\": {}, \"residual_fraction\": {}, \"signal_fraction\": {}}}",
+        k ? ", " : "", json_number(d.where.bands[k].f0), json_number(d.where.bands[k].f1),
+        json_number(d.where.bands[k].residual_fraction),
+        json_number(d.where.bands[k].signal_fraction));
+  j += "],\n    \"regions\": [";
+  for (std::size_t k = 0; k < d.where.regions.size(); ++k)
+    fmt::format_to(out, "{}{{\"name\": {}, \"rms\": {}, \"excess\": {}, \"markers\": {}}}",
+                   k ? ", " : "", json_string(d.where.regions[k].name),
+                   json_number(d.where.regions[k].rms), json_number(d.where.regions[k].excess),
+                   json_strings(d.where.regions[k].markers));
+  j += "]\n  },\n";
+  // Screening.
+  fmt::format_to(out, "  \"screening\": {{\"alpha\": {}, \"ranking\": [",
+                 json_number(d.ranking.alpha));
+  for (std::size_t k = 0; k < d.ranking.order.size(); ++k) {
+    const auto& r = d.ranking.order[k];
+    fmt::format_to(out,
+                   "{}\n    {{\"candidate\": {}, \"dof\": {}, \"statistic\": {}, \"p_value\": {}, "
+                   "\"threshold\": {}, \"predicted_rms\": {}, \"conditional_statistic\": {}, "
+                   "\"significant\": {}{}}}",
+                   k ? "," : "", json_string(candidate_name(d, r.candidate)), r.marginal.dof,
+                   json_number(r.marginal.statistic), json_number(r.marginal.p_value),
+                   json_number(r.threshold), json_number(r.marginal.predicted_rms),
+                   json_number(r.conditional.statistic), r.significant ? "true" : "false",
+                   r.marginal.error.empty() ? "" : ", \"error\": " + json_string(r.marginal.error));
+  }
+  j += "],\n    \"confounded\": [";
+  for (std::size_t k = 0; k < d.ranking.confounded.size(); ++k) {
+    const auto& c = d.ranking.confounded[k];
+    fmt::format_to(out, "{}{{\"a\": {}, \"b\": {}, \"correlation\": {}}}", k ? ", " : "",
+                   json_string(candidate_name(d, c.a)), json_string(candidate_name(d, c.b)),
+                   json_number(c.correlation));
+  }
+  j += "],\n    \"not_screened\": [";
+  {
+    bool first = true;
+    for (const auto& [id, why] : unavailable_candidates()) {
+      fmt::format_to(out, "{}{{\"candidate\": {}, \"why\": {}}}", first ? "" : ", ",
+                     json_string(id), json_string(why));
+      first = false;
+    }
+  }
+  j += "]},\n  \"second_screening\": [";
+  for (std::size_t k = 0; k < d.second_ranking.order.size(); ++k) {
+    const auto& r = d.second_ranking.order[k];
+    fmt::format_to(out,
+                   "{}{{\"candidate\": {}, \"statistic\": {}, \"threshold\": {}, "
+                   "\"significant\": {}}}",
+                   k ? ", " : "", json_string(candidate_name(d, r.candidate)),
+                   json_number(r.marginal.statistic), json_number(r.threshold),
+                   r.significant ? "true" : "false");
+  }
+  j += "],\n  \"refits\": [";
+  for (std::size_t k = 0; k < d.refits.size(); ++k) {
+    const RefitResult& r = d.refits[k];
+    fmt::format_to(out,
+                   "{}\n    {{\"candidate\": {}, \"ok\": {}, \"error\": {}, \"evaluations\": {}, "
+                   "\"train_rms_before\": {}, \"train_rms_after\": {}, \"statistic\": {}, "
+                   "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
+                   "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
+                   "\"passes_training\": {}, \"passes_heldout\": {}, \"where\": {}, "
+                   "\"parameters\": {}, \"fitted\": {}}}",
+                   k ? "," : "", json_string(candidate_name(d, r.candidate)),
+                   r.ok ? "true" : "false", json_string(r.error), r.evaluations,
+                   json_number(d.nominal_train.rms), json_number(r.train.rms),
+                   json_number(r.statistic), json_number(r.threshold), r.dof, json_number(r.bic),
+                   json_number(heldout_rms(r.heldout, false)),
+                   json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
+                   json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
+                   r.passes_heldout ? "true" : "false", json_string(r.where),
+                   json_values(r.parameters), json_string(r.fitted_yaml));
+  }
+  fmt::format_to(out,
+                 "],\n  \"seconds\": {{\"nominal_fit\": {}, \"screening\": {}, \"refits\": {}, "
+                 "\"heldout\": {}, \"second_screening\": {}}},\n  \"fitted\": {}\n}}\n",
+                 json_number(d.seconds.nominal_fit), json_number(d.seconds.screening),
+                 json_number(d.seconds.refits), json_number(d.seconds.heldout),
+                 json_number(d.seconds.second_screening), json_string(d.fitted_yaml));
+  return j;
+}
+
+/// Residual distance per marker over time (nominal fit, training motion 0).
+std::string residual_plot(const Diagnosis& d) {
+  svg::Figure fig;
+  fig.title = "Residual of the nominal fit per marker";
+  svg::Plot plot;
+  plot.x_label = "t (s)";
+  plot.y_label = "|simulated − observed| (mm)";
+  const std::vector<std::string> colours = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728",
+                                            "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"};
+  std::map<std::pair<int, double>, double> sq;
+  for (std::size_t k = 0; k < d.nominal_samples.size(); ++k) {
+    const auto& s = d.nominal_samples[k];
+    if (s.experiment != 0) continue;
+    const double r = d.nominal_train.residual[static_cast<long>(k)] / s.sqrt_weight;
+    sq[{s.marker, s.t}] += r * r;
+  }
+  for (std::size_t i = 0; i < d.marker_names.size(); ++i) {
+    svg::Series s;
+    s.name = d.marker_names[i];
+    s.colour = colours[i % colours.size()];
+    for (const auto& [key, v] : sq)
+      if (key.first == static_cast<int>(i)) {
+        s.x.push_back(key.second);
+        s.y.push_back(1e3 * std::sqrt(v));
+      }
+    plot.series.push_back(s);
+  }
+  svg::Series noise;
+  noise.name = "noise σ√3";
+  noise.colour = "#000000";
+  noise.dashed = true;
+  if (!sq.empty()) {
+    noise.x = {sq.begin()->first.second, sq.rbegin()->first.second};
+    noise.y = {1e3 * d.noise.sigma * std::sqrt(3.0), 1e3 * d.noise.sigma * std::sqrt(3.0)};
+  }
+  plot.series.push_back(noise);
+  fig.panels.push_back(plot);
+  return svg::render(fig);
+}
+
+std::string spectrum_plot(const Diagnosis& d) {
+  svg::Plot plot;
+  plot.title = "Power per frequency band: residual against the observed motion";
+  plot.x_label = "band centre (Hz)";
+  plot.y_label = "fraction of the total";
+  plot.log_x = true;
+  svg::Series res, sig;
+  res.name = "residual";
+  sig.name = "observed motion";
+  sig.colour = "#7f7f7f";
+  res.style = sig.style = svg::Style::line_and_markers;
+  for (const auto& b : d.where.bands) {
+    const double centre = b.f0 > 0 ? std::sqrt(b.f0 * b.f1) : 0.5 * b.f1;
+    res.x.push_back(centre);
+    sig.x.push_back(centre);
+    res.y.push_back(b.residual_fraction);
+    sig.y.push_back(b.signal_fraction);
+  }
+  plot.series = {sig, res};
+  return svg::render(plot);
+}
+
+std::string ranking_plot(const Diagnosis& d) {
+  svg::Plot plot;
+  plot.title = "Screening: score statistic over its threshold (above 1: significant)";
+  plot.x_label = "rank";
+  plot.y_label = "statistic / threshold";
+  plot.log_y = true;
+  svg::Series s, line;
+  s.name = "candidates";
+  s.style = svg::Style::markers;
+  for (std::size_t k = 0; k < d.ranking.order.size(); ++k) {
+    const auto& r = d.ranking.order[k];
+    s.x.push_back(static_cast<double>(k + 1));
+    s.y.push_back(std::max(1e-3, r.marginal.statistic / r.threshold));
+    s.labels.push_back(candidate_name(d, r.candidate));
+  }
+  line.name = "threshold";
+  line.colour = "#d62728";
+  line.dashed = true;
+  line.x = {1, static_cast<double>(std::max<std::size_t>(1, d.ranking.order.size()))};
+  line.y = {1, 1};
+  plot.series = {s, line};
+  return svg::render(plot, 760, 460);
+}
+
+std::string report(const Diagnosis& d) {
+  std::string r;
+  auto out = std::back_inserter(r);
+  fmt::format_to(out, "# Diagnosis of {}\n\n", d.scenario);
+  if (d.interrupted) r += "**Interrupted**: the stages below are those that finished.\n\n";
+  if (d.effect == "none")
+    r += "**Verdict: no significant effect.** No candidate's refit lowered the misfit by more "
+         "than the estimated noise can explain";
+  else
+    fmt::format_to(out, "**Verdict: {}** ({}).", d.effect,
+                   d.verdict_where.empty() ? "the whole body" : d.verdict_where[0]);
+  if (d.effect == "none")
+    r += d.settings.validate.empty() ? ".\n\n" : " on the training and the held-out motions.\n\n";
+  else
+    r += "\n\n";
+  if (d.accepted >= 0) {
+    const RefitResult& a = d.refits[d.accepted];
+    fmt::format_to(out, "Adding it lowers the training RMS from {:.4f} to {:.4f} mm per coordinate",
+                   d.nominal_train.rms * 1e3, a.train.rms * 1e3);
+    if (!a.heldout.empty())
+      fmt::format_to(out, " and the held-out RMS from {:.4f} to {:.4f} mm",
+                     heldout_rms(a.heldout, false) * 1e3, heldout_rms(a.heldout, true) * 1e3);
+    fmt::format_to(out, "; the noise level is {:.4f} mm. Fitted model: `{}`.\n\n",
+                   d.noise.sigma * 1e3, a.fitted_yaml);
+    if (d.second_candidate >= 0)
+      fmt::format_to(out,
+                     "Screened again with it in the model, {} is significant too (LM {:.1f} "
+                     "against {:.1f}; not refitted).\n\n",
+                     candidate_name(d, d.second_candidate),
+                     d.second_ranking.order[0].marginal.statistic,
+                     d.second_ranking.order[0].threshold);
+    else if (!d.second_ranking.order.empty())
+      r += "Screened again with it in the model, no further candidate is significant.\n\n";
+  }
+  fmt::format_to(out,
+                 "## Nominal fit\n\n{} evaluations; training RMS {:.4f} mm per coordinate "
+                 "(noise {:.4f} mm from {} third differences of the residual; the plain residual "
+                 "RMS would say {:.4f} mm).\n\n| parameter | value |\n|---|---:|\n",
+                 d.nominal_evaluations, d.nominal_train.rms * 1e3, d.noise.sigma * 1e3,
+                 d.noise.differences, d.noise.naive * 1e3);
+  for (const auto& v : d.nominal_parameters)
+    fmt::format_to(out, "| {} | {:.6g} |\n", v.name, v.value);
+  r += "\n## Where\n\n![residual per marker](residual.svg)\n\n"
+       "| marker | region | along | rms x | rms y | rms z | excess over noise | gain | delay (ms) "
+       "|\n"
+       "|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
+  for (const auto& m : d.where.markers)
+    fmt::format_to(out,
+                   "| {} | {} | {:.2f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.2f} |\n",
+                   m.name, m.region, m.along, m.rms[0] * 1e3, m.rms[1] * 1e3, m.rms[2] * 1e3,
+                   m.excess * 1e3, m.gain, m.delay * 1e3);
+  r += "\n(mm; `along` is 0 at the clamp and 1 at the free end; gain and delay of the simulated "
+       "track against the observed one on the marker's main axis.)\n\n"
+       "| region | rms (mm) | excess (mm) | markers |\n|---|---:|---:|---|\n";
+  for (const auto& g : d.where.regions) {
+    std::string names;
+    for (const auto& n : g.markers) names += (names.empty() ? "" : ", ") + n;
+    fmt::format_to(out, "| {} | {:.3f} | {:.3f} | {} |\n", g.name, g.rms * 1e3, g.excess * 1e3,
+                   names);
+  }
+  r += "\n| window (s) | rms (mm) |\n|---|---:|\n";
+  for (const auto& w : d.where.windows)
+    fmt::format_to(out, "| {:.2f}–{:.2f} | {:.3f} |\n", w.t0, w.t1, w.rms * 1e3);
+  r += "\n![spectra](spectrum.svg)\n\n## Which: screening at the nominal fit\n\n"
+       "![ranking](ranking.svg)\n\n"
+       "| rank | candidate | dof | score statistic | threshold | predicted rms (mm) | given those "
+       "above | significant |\n"
+       "|---:|---|---:|---:|---:|---:|---:|---|\n";
+  for (std::size_t k = 0; k < d.ranking.order.size(); ++k) {
+    const auto& x = d.ranking.order[k];
+    fmt::format_to(out, "| {} | {} | {} | {:.1f} | {:.1f} | {:.4f} | {:.1f} | {} |\n", k + 1,
+                   candidate_name(d, x.candidate), x.marginal.dof, x.marginal.statistic,
+                   x.threshold, x.marginal.predicted_rms * 1e3, x.conditional.statistic,
+                   x.significant ? "yes" : "");
+  }
+  fmt::format_to(out,
+                 "\nThreshold: the χ²(dof) quantile at α = {:g} over {} candidates (Bonferroni); "
+                 "noise from the residual's third differences.\n",
+                 d.ranking.alpha, d.ranking.order.size());
+  for (const auto& c : d.ranking.confounded)
+    fmt::format_to(out,
+                   "\n- **Confounded**: {} and {} (canonical correlation {:.3f}): these data "
+                   "cannot tell them apart; a motion that excites them differently (another "
+                   "frequency, amplitude or direction) would.\n",
+                   candidate_name(d, c.a), candidate_name(d, c.b), c.correlation);
+  r += "\nNot screened:\n\n";
+  for (const auto& [id, why] : unavailable_candidates()) fmt::format_to(out, "- {}: {}\n", id, why);
+  r += "\n## How far: refits\n\n"
+       "| candidate | train rms (mm) | LR statistic | threshold | held-out rms (mm) | held-out "
+       "drop / threshold | where | parameters |\n|---|---:|---:|---:|---:|---:|---|---|\n";
+  for (const auto& x : d.refits) {
+    std::string params;
+    for (const auto& v : x.parameters)
+      params += fmt::format("{}{} = {:.4g}", params.empty() ? "" : ", ", v.name, v.value);
+    if (!x.ok) {
+      fmt::format_to(out, "| {} | failed: {} | | | | | | |\n", candidate_name(d, x.candidate),
+                     x.error);
+      continue;
+    }
+    fmt::format_to(out, "| {} | {:.4f} → {:.4f} | {:.1f} | {:.1f} | {} | {} | {} | {} |\n",
+                   candidate_name(d, x.candidate), d.nominal_train.rms * 1e3, x.train.rms * 1e3,
+                   x.statistic, x.threshold,
+                   x.heldout.empty()
+                       ? std::string("—")
+                       : fmt::format("{:.4f} → {:.4f}", heldout_rms(x.heldout, false) * 1e3,
+                                     heldout_rms(x.heldout, true) * 1e3),
+                   x.heldout.empty() || !(x.heldout_threshold > 0)
+                       ? std::string("—")
+                       : fmt::format("{:.2f}", x.heldout_drop / x.heldout_threshold),
+                   x.where, params);
+  }
+  r += "\nAn effect is named when its refit's likelihood-ratio statistic (the drop of ‖r‖² "
+       "over σ̂²) clears the χ² threshold and, with held-out motions, their ‖r‖² drops by "
+       "more than 2 z σ̂ ‖Δh‖ (what fitting noise alone could give, z at the same α).\n";
+  fmt::format_to(out,
+                 "\nStage times: nominal fit {:.0f} s, screening {:.0f} s, refits {:.0f} s "
+                 "(held-out checks {:.0f} s), second screening {:.0f} s.\n",
+                 d.seconds.nominal_fit, d.seconds.screening, d.seconds.refits, d.seconds.heldout,
+                 d.seconds.second_screening);
+  return r;
+}
+
+}  // namespace
+
+std::string write_diagnosis_outputs(const Diagnosis& d) {
+  const fs::path dir(d.outdir);
+  fs::create_directories(dir);
+  write_file_atomic((dir / "diagnosis.json").string(), diagnosis_json(d));
+  if (!d.nominal_samples.empty()) {
+    write_file_atomic((dir / "residual.svg").string(), residual_plot(d));
+    write_file_atomic((dir / "spectrum.svg").string(), spectrum_plot(d));
+    write_file_atomic((dir / "ranking.svg").string(), ranking_plot(d));
+  }
+  std::string csv = "marker,region,along,rms_x,rms_y,rms_z,rms,excess,gain,delay\n";
+  for (const auto& m : d.where.markers)
+    csv += fmt::format("{},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g}\n", m.name,
+                       m.region, m.along, m.rms[0], m.rms[1], m.rms[2], m.rms_total, m.excess,
+                       m.gain, m.delay);
+  write_file_atomic((dir / "where-markers.csv").string(), csv);
+  // The accepted model's files, next to the report (fitted.yaml names its field file
+  // relative to itself).
+  if (!d.fitted_yaml.empty() && fs::exists(d.fitted_yaml) &&
+      fs::absolute(d.fitted_yaml) != fs::absolute(dir / "fitted.yaml")) {
+    for (const char* name : {"fitted-fields.csv", "fitted.yaml"}) {
+      const fs::path from = fs::path(d.fitted_yaml).parent_path() / name;
+      if (!fs::exists(from)) continue;
+      std::ifstream in(from);
+      const std::string text((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+      write_file_atomic((dir / name).string(), text);
+    }
+  }
+  const std::string path = (dir / "report.md").string();
+  write_file_atomic(path, report(d));
+  return path;
+}
+
+}  // namespace kelvin

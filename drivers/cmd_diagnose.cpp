@@ -1,0 +1,91 @@
+// `kelvin diagnose`: where the sim-to-real gap of a nominal model lies, which
+// unmodelled effect causes it, and how far it shrinks once that effect is added.
+#include <fmt/format.h>
+
+#include <filesystem>
+
+#include "diagnose/diagnosis.hpp"
+#include "diagnose/diagnosis_outputs.hpp"
+#include "drivers/commands.hpp"
+#include "engine/error.hpp"
+
+namespace kelvin {
+namespace {
+
+struct DiagnoseArgs {
+  std::string scenario, outdir;
+  int max_evaluations = 0;
+  bool resume = false, quiet = false;
+};
+
+int run(const DiagnoseArgs& args) {
+  const std::string outdir =
+      args.outdir.empty() ? std::filesystem::path(args.scenario).stem().string() + "-diagnosis"
+                          : args.outdir;
+  if (const std::string why = prepare_output_dir(outdir); !why.empty()) {
+    fmt::print(stderr, "error: {}\n", why);
+    return kExitInputError;
+  }
+  DiagnoseOptions o;
+  o.resume = args.resume;
+  o.max_evaluations = args.max_evaluations;
+  o.interrupt = &g_interrupted;
+  if (!args.quiet)
+    o.progress = [](const std::string& line) {
+      fmt::print("{}\n", line);
+      std::fflush(stdout);
+    };
+  Diagnosis d;
+  try {
+    d = run_diagnosis(args.scenario, outdir, o);
+  } catch (const Error& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return kExitInputError;
+  }
+  try {
+    const std::string report = write_diagnosis_outputs(d);
+    fmt::print("verdict: {}{}; report: {}\n", d.effect,
+               d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")", report);
+  } catch (const Error& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return kExitRunFailed;
+  }
+  if (d.interrupted) {
+    fmt::print(stderr, "interrupted; continue with: kelvin diagnose {} -o {} --resume\n",
+               args.scenario, outdir);
+    return kExitInterrupted;
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void register_diagnose(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<DiagnoseArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "diagnose",
+      "Diagnose the gap between a fitted nominal model and its captured motion: where the "
+      "residual lies, which candidate effect explains it (screened at the nominal fit, the top "
+      "ones refitted and checked on the held-out motions of diagnose.validate), and how far the "
+      "misfit shrinks with it. Writes diagnosis.json, report.md with SVG plots, "
+      "where-markers.csv and fitted.yaml of the accepted model.");
+  cmd->add_option("scenario", args->scenario, "scenario YAML file with a fit section")->required();
+  cmd->add_option("-o,--output", args->outdir,
+                  "output directory (default: <scenario stem>-diagnosis)");
+  cmd->add_flag("--resume", args->resume,
+                "reuse the fits an interrupted diagnosis in the output directory finished");
+  cmd->add_option("--max-evaluations", args->max_evaluations,
+                  "overrides fit.max_evaluations for every fit of the diagnosis")
+      ->check(positive_number());
+  cmd->add_flag("-q,--quiet", args->quiet, "print only the verdict");
+  cmd->callback([args, &exit_code] {
+    try {
+      exit_code = run(*args);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "error: {}\n", e.what());
+      exit_code = kExitRunFailed;
+    }
+  });
+}
+
+}  // namespace kelvin

@@ -1,0 +1,204 @@
+// The gap diagnosis on small cases: the robust noise level, extended scenarios that
+// leave the nominal model unchanged, and `kelvin diagnose`'s verdict on a shaken bar
+// with an effect put into its tracks (named, with the misfit down to the noise) and
+// without one (none).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include "adjoint/fit_problem.hpp"
+#include "diagnose/candidates.hpp"
+#include "diagnose/diagnosis.hpp"
+#include "diagnose/diagnosis_outputs.hpp"
+#include "diagnose/extended_scenario.hpp"
+#include "diagnose/noise.hpp"
+#include "engine/csv.hpp"
+#include "test_support.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+
+// White noise under a smooth model error 6× its size, with gaps: the third
+// differences see the noise, ‖r‖ sees both.
+TEST(NoiseEstimate, IgnoresASmoothModelErrorAndGaps) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0, 0.5e-3);
+  std::vector<double> r;
+  std::vector<ResidualSample> samples;
+  for (int marker = 0; marker < 4; ++marker)
+    for (int axis = 0; axis < 3; ++axis)
+      for (int k = 0; k < 400; ++k) {
+        if (k % 97 < 12) continue;  // occlusions
+        const double t = k / 180.0;
+        r.push_back(3e-3 * std::sin(2 * M_PI * 3 * t + marker) +
+                    1e-3 * std::sin(2 * M_PI * 7.5 * t) + noise(rng));
+        samples.push_back({0, marker, axis, t, 1});
+      }
+  const NoiseEstimate n = estimate_noise(Eigen::Map<Eigen::VectorXd>(r.data(), r.size()), samples);
+  EXPECT_NEAR(n.sigma, 0.5e-3, 0.03e-3);
+  EXPECT_GT(n.naive, 2e-3);
+  EXPECT_GT(n.differences, 3500);
+}
+
+const std::string kNominal = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 0.8e5 }
+  viscous: { model: newtonian, nu: 30 })";
+
+// Captured at 1 kHz: the noise estimate assumes the model error is slow against the
+// frame rate (it cancels (2π f Δt)³ of it), and the bar is shaken at 13 and 17 Hz.
+std::string bar(const std::string& material, const std::string& tail, double end = 0.1) {
+  test::ShakenBar b;
+  b.material = material;
+  b.end = end;
+  b.output_rate = 1000;
+  b.rtol = 1e-7;
+  b.atol = 1e-11;
+  b.tail = tail;
+  return test::shaken_bar_yaml(b);
+}
+
+/// Adds N(0, σ²) to every coordinate of a track file.
+std::string noisy(const std::string& file, const fs::path& out, double sigma, unsigned seed) {
+  MarkerTracks t = read_marker_tracks(file);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0, sigma);
+  std::string csv = "t";
+  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
+  csv += "\n";
+  for (long k = 0; k < t.xyz.cols(); ++k) {
+    csv += fmt::format("{:.12g}", t.times[k]);
+    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k) + n(rng));
+    csv += "\n";
+  }
+  test::write_text(out, csv);
+  return out.string();
+}
+
+// Every candidate switched on at its nominal value leaves Φ as it was: the nominal
+// model is inside each extended family.
+TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
+  const fs::path dir = test::scratch("diagnosis-nested");
+  const std::string stiffer = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 30 })";
+  const std::string truth =
+      test::simulate_tracks(dir, "truth", bar(stiffer, test::kShakenBarMarkers));
+  test::write_text(dir / "nominal.yaml",
+                   bar(kNominal, test::kShakenBarMarkers + "\n  observed: " + truth +
+                                     "\nfit:\n  parameters: [elastic.mu, viscous.nu]\n"));
+  const Scenario nominal = load_scenario((dir / "nominal.yaml").string());
+  const std::vector<Candidate> all = builtin_candidates(nominal);
+  std::vector<std::string> ids;
+  for (const auto& c : all) ids.push_back(c.id);
+  for (const char* id : {"stiffening", "damping_law", "drag", "inhomogeneity", "added_mass",
+                         "anisotropy", "sync_lag", "marker_offset", "registration"})
+    EXPECT_NE(std::find(ids.begin(), ids.end(), id), ids.end()) << id;
+  FitProblem plain(nominal, nominal.fit.parameters);
+  const Evaluation base = plain.evaluate(plain.map().initial(), {});
+  ASSERT_TRUE(base.ok) << base.error;
+
+  std::vector<const Candidate*> with;
+  for (const auto& c : all) with.push_back(&c);
+  const ExtendedScenario ext =
+      write_extended_scenario(nominal.path, nominal, with, true, (dir / "all.yaml").string());
+  EXPECT_EQ(ext.nominal_specs, 2);
+  ASSERT_EQ(ext.candidate_specs.size(), all.size());
+  const Scenario extended = load_scenario(ext.path);
+  // The neo-Hookean term, the stiffening one and one fibre per screened direction.
+  EXPECT_EQ(extended.material.elastic.size(), 1u + 1u + screening_directions().size());
+  EXPECT_EQ(extended.material.viscous[0].model, "power-law");
+  FitProblem wide(extended, extended.fit.parameters);
+  for (int j = 0; j < plain.map().size(); ++j) EXPECT_EQ(wide.map().label(j), plain.map().label(j));
+  const Evaluation e = wide.evaluate(wide.map().initial(), {});
+  ASSERT_TRUE(e.ok) << e.error;
+  // Equal to the integration error (rtol 1e-7): the extra terms change the Newton
+  // iterations' round-off, not the model.
+  EXPECT_NEAR(e.phi, base.phi, 1e-6 * base.phi);
+}
+
+/// A diagnosis scenario for the shaken bar whose tracks came from `truth` (with
+/// noise), a held-out motion of the same bar at other frequencies.
+fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned seed) {
+  const std::string train =
+      noisy(test::simulate_tracks(dir, "truth-train", bar(truth, test::kShakenBarMarkers)),
+            dir / "train.csv", 1e-5, seed);
+  test::ShakenBar h;
+  h.material = truth;
+  h.end = 0.1;
+  h.output_rate = 1000;
+  h.rtol = 1e-7;
+  h.atol = 1e-11;
+  h.frequency_y = 11;
+  h.frequency_z = 19;
+  h.amplitude_y = 0.002;
+  h.amplitude_z = 0.003;
+  h.tail = test::kShakenBarMarkers;
+  const std::string held =
+      noisy(test::simulate_tracks(dir, "truth-heldout", test::shaken_bar_yaml(h)),
+            dir / "heldout.csv", 1e-5, seed + 1);
+  h.material = kNominal;
+  h.tail = test::kShakenBarMarkers + "\n  observed: " + held + "\n";
+  test::write_text(dir / "heldout.yaml", test::shaken_bar_yaml(h));
+  test::write_text(dir / "train.yaml",
+                   bar(kNominal, test::kShakenBarMarkers + "\n  observed: " + train +
+                                     "\nfit:\n  parameters: [elastic.mu, viscous.nu]\n"
+                                     "  max_evaluations: 30\ndiagnose:\n  candidates: [stiffening, "
+                                     "drag, sync_lag, marker_offset]\n  refits: 2\n"
+                                     "  validate: [heldout.yaml]\n"));
+  return dir / "train.yaml";
+}
+
+TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
+  const fs::path dir = test::scratch("diagnosis-drag");
+  const std::string truth = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous:
+    - { model: newtonian, nu: 20 }
+    - { model: drag, c: 40 })";
+  const fs::path scenario = diagnosis_case(dir, truth, 7);
+  DiagnoseOptions o;
+  const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), o);
+  write_diagnosis_outputs(d);
+  EXPECT_EQ(d.effect, "drag");
+  ASSERT_GE(d.accepted, 0);
+  const RefitResult& a = d.refits[d.accepted];
+  // The noise is 0.01 mm; the refit's training and held-out RMS come down to it.
+  EXPECT_NEAR(d.noise.sigma, 1e-5, 0.15e-5);
+  EXPECT_GT(d.nominal_train.rms, 3 * d.noise.sigma);
+  EXPECT_LT(a.train.rms, 1.3 * d.noise.sigma);
+  ASSERT_EQ(a.heldout.size(), 1u);
+  EXPECT_LT(a.heldout[0].after.rms, 1.3 * d.noise.sigma);
+  EXPECT_GT(a.heldout[0].before.rms, 2 * a.heldout[0].after.rms);
+  ASSERT_EQ(a.parameters.size(), 1u);
+  EXPECT_NEAR(a.parameters[0].value, 40, 4);
+  // Screened again with the drag in the model, nothing else is left to explain.
+  EXPECT_FALSE(d.second_ranking.order.empty());
+  EXPECT_EQ(d.second_candidate, -1);
+  EXPECT_TRUE(fs::exists(dir / "out" / "diagnosis.json"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "report.md"));
+  // fitted.yaml is the extended model: it runs and names the drag.
+  const Scenario fitted = load_scenario((dir / "out" / "fitted.yaml").string());
+  ASSERT_EQ(fitted.material.viscous.size(), 2u);
+  EXPECT_EQ(fitted.material.viscous[1].model, "drag");
+}
+
+TEST(Diagnosis, FindsNoEffectWhereThereIsNone) {
+  const fs::path dir = test::scratch("diagnosis-none");
+  const std::string truth = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 20 })";
+  const fs::path scenario = diagnosis_case(dir, truth, 11);
+  const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), {});
+  EXPECT_EQ(d.effect, "none");
+  EXPECT_LT(d.nominal_train.rms, 1.3 * d.noise.sigma);
+  EXPECT_TRUE(std::none_of(d.ranking.order.begin(), d.ranking.order.end(),
+                           [](const RankedCandidate& r) { return r.significant; }));
+}
+
+}  // namespace
+}  // namespace kelvin
