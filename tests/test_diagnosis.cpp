@@ -10,11 +10,13 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "diagnose/candidates.hpp"
+#include "diagnose/diagnose_settings.hpp"
 #include "diagnose/diagnosis.hpp"
 #include "diagnose/diagnosis_outputs.hpp"
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/noise.hpp"
 #include "engine/csv.hpp"
+#include "engine/error.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
@@ -43,6 +45,34 @@ TEST(NoiseEstimate, IgnoresASmoothModelErrorAndGaps) {
   EXPECT_NEAR(n.sigma, 0.5e-3, 0.03e-3);
   EXPECT_GT(n.naive, 2e-3);
   EXPECT_GT(n.differences, 3500);
+}
+
+// A bad diagnose section is refused with the file, line and key; a candidate that
+// is not built says why.
+TEST(DiagnoseSettings, BadEntriesAreRefusedWithTheirPlace) {
+  const fs::path dir = test::scratch("diagnose-settings");
+  const auto refusal = [&](const std::string& section) -> std::string {
+    test::write_text(dir / "s.yaml", "name: s\ndiagnose:\n" + section);
+    try {
+      load_diagnose_settings((dir / "s.yaml").string());
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_NE(refusal("  refits: -1\n").find("s.yaml:3:11: diagnose.refits: must be in [0, 20]"),
+            std::string::npos);
+  EXPECT_NE(refusal("  candidates: [stifening]\n").find("did you mean 'stiffening'"),
+            std::string::npos);
+  EXPECT_NE(refusal("  candidates: [clamp_compliance]\n").find("cannot be screened"),
+            std::string::npos);
+  EXPECT_NE(refusal("  validate: [missing.yaml]\n").find("diagnose.validate[0]"),
+            std::string::npos);
+  EXPECT_NE(refusal("  refit: 3\n").find("diagnose.refit"), std::string::npos);
+  test::write_text(dir / "ok.yaml", "name: s\n");
+  const DiagnoseSettings d = load_diagnose_settings((dir / "ok.yaml").string());
+  EXPECT_EQ(d.refits, 3);
+  EXPECT_TRUE(d.candidates.empty());
 }
 
 const std::string kNominal = R"(  density: 1100
