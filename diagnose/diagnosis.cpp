@@ -108,7 +108,8 @@ struct FitRun {
 };
 
 FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
-                 const DiagnoseOptions& o, const std::string& label, int max_evaluations = 0) {
+                 const DiagnoseOptions& o, const std::string& label, double ftol_rel,
+                 int max_evaluations = 0) {
   FitRun run;
   const ParameterMap& map = m.problem->map();
   if (o.resume) {
@@ -121,6 +122,8 @@ FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
   }
   FitOptions f = fit_options_of(*m.scenario);
   f.gradient.interrupt = o.interrupt;
+  f.ftol_rel = std::max(f.ftol_rel, ftol_rel);
+  f.precision = ftol_rel;
   if (max_evaluations > 0) f.max_evaluations = max_evaluations;
   if (o.max_evaluations > 0) f.max_evaluations = o.max_evaluations;
   f.on_evaluation = [&](const FitRecord& r) {
@@ -255,8 +258,26 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                   d.candidates.size()));
   Model base = load_model(d.scenario, nominal, {}, false, (models / "nominal.yaml").string());
   const ParameterMap& base_map = base.problem->map();
-  const FitRun nominal_fit =
-      fit_model(base, base_map.initial(), (state / "nominal.csv").string(), o, "nominal");
+  const int m = static_cast<int>(d.candidates.size());
+  // Every verdict compares ‖r‖² between models against χ² thresholds in units of σ̂²:
+  // a fit is precise enough when its relative change of Φ is a tenth of the smallest
+  // threshold, at the start's ‖r‖² and noise (a single-stage fit has no other rule
+  // that stops it on a flat minimum).
+  const auto precision = [&](const Eigen::VectorXd& r, double sigma) {
+    return 0.1 * chi_square_quantile(d.settings.alpha / m, 1) * sigma * sigma /
+           std::max(r.squaredNorm(), 1e-300);
+  };
+  double nominal_ftol = 0;
+  {
+    const GaussNewtonSystem g0 =
+        gauss_newton_system(*base.problem, base_map.initial(), o.interrupt, false);
+    if (g0.ok) {
+      const NoiseEstimate n0 = estimate_noise(g0.residual, g0.samples);
+      nominal_ftol = precision(g0.residual, n0.sigma);
+    }
+  }
+  const FitRun nominal_fit = fit_model(base, base_map.initial(), (state / "nominal.csv").string(),
+                                       o, "nominal", nominal_ftol);
   if (!nominal_fit.ok) throw Error(fmt::format("the nominal fit failed: {}", nominal_fit.error));
   const Eigen::VectorXd p_nominal = nominal_fit.p;
   d.nominal_evaluations = nominal_fit.evaluations;
@@ -361,7 +382,6 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
 
   // ---- 3. Refits of the top candidates ----------------------------------------
   t0 = Clock::now();
-  const int m = static_cast<int>(groups.size());
   const double sigma2 = d.noise.sigma * d.noise.sigma;
   const double N = d.nominal_train.samples;
   std::vector<int> order;
@@ -419,13 +439,14 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       }
     }
     p0 = p0.cwiseMax(lower).cwiseMin(upper);
-    FitRun fit = fit_model(model, p0, (state / (name + ".csv")).string(), o, name,
+    const double refit_ftol = precision(d.nominal_train.residual, d.noise.sigma);
+    FitRun fit = fit_model(model, p0, (state / (name + ".csv")).string(), o, name, refit_ftol,
                            d.settings.refit_evaluations);
     if (!fit.ok && !stopped()) {
       // The linearised start may lie where the model cannot run: from the nominal.
       Eigen::VectorXd p1 = map.initial();
       p1.head(n_nominal) = p_nominal;
-      fit = fit_model(model, p1, (state / (name + ".csv")).string(), o, name,
+      fit = fit_model(model, p1, (state / (name + ".csv")).string(), o, name, refit_ftol,
                       d.settings.refit_evaluations);
     }
     res.evaluations = fit.evaluations;

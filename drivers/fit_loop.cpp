@@ -351,7 +351,8 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       if (k > kPlateauWindow) {
         const double before = c.stage_best[k - 1 - kPlateauWindow], now = c.stage_best.back();
         const double gain = (before - now) / std::abs(now);
-        const double floor = c.tolerance_scale > 1 ? kCoarsePlateauGain : c.accuracy;
+        const double floor =
+            c.tolerance_scale > 1 ? kCoarsePlateauGain : std::max(c.accuracy, c.options.precision);
         if (floor > 0 && gain < floor) c.plateau = true;
       }
     }
@@ -581,8 +582,9 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     if (!std::isnan(c.remeasured)) best_before = c.remeasured;
     // A gain within Φ's accuracy at this stage is not one.
     const bool improved =
-        restart == 0 || best_before - c.outcome.best.objective >
-                            std::max(kRestartGain, c.accuracy) * std::abs(best_before);
+        restart == 0 ||
+        best_before - c.outcome.best.objective >
+            std::max({kRestartGain, c.accuracy, options.precision}) * std::abs(best_before);
     const bool next_stage =
         coarse && (converged || stalled || plateau || !improved || restart >= kMaxRestarts);
     if (next_stage) {

@@ -49,6 +49,10 @@ struct FitOptions {
   /// loose tolerances, and a simulation with its gradient costs a fraction.
   double start_tolerance_scale = 1;
   double smoothness = 0;  // γ
+  /// Relative change of Φ the caller needs resolved (0: none given): a gain below it
+  /// over the plateau window, or from a restart, is no gain (the diagnosis sets it from
+  /// its χ² thresholds; a single-stage fit has no measured accuracy to stop at).
+  double precision = 0;
   /// Called after every evaluation (the driver prints accepted ones and failures,
   /// appends history, saves the resume state).
   std::function<void(const FitRecord&)> on_evaluation;
