@@ -6,6 +6,7 @@
 //                            [--max-evaluations 0]
 #include <fmt/format.h>
 
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -33,7 +34,11 @@ int main(int argc, char** argv) {
   fs::remove_all(out);
   DiagnoseOptions o;
   o.max_evaluations = max_evaluations;
-  o.progress = [](const std::string& line) { fmt::print("{}\n", line); };
+  // Flushed per line: a redirected run that is stopped keeps what it printed.
+  o.progress = [](const std::string& line) {
+    fmt::print("{}\n", line);
+    std::fflush(stdout);
+  };
   try {
     const Diagnosis d = run_diagnosis((fs::path(dir) / "train.yaml").string(), out, o);
     int refit_evaluations = 0;
