@@ -385,35 +385,24 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   const double sigma2 = d.noise.sigma * d.noise.sigma;
   const double N = d.nominal_train.samples;
   std::vector<int> order;
-  for (const auto& rc : d.ranking.order) order.push_back(rc.candidate);
+  std::map<int, CandidateScore> marginal;  // by candidate
+  for (const auto& rc : d.ranking.order) {
+    order.push_back(rc.candidate);
+    marginal[rc.candidate] = rc.marginal;
+  }
   // Refit by the marginal statistic: the greedy order credits an effect once, but
   // which of two confounded ones to refit is the refit's question.
-  std::sort(order.begin(), order.end(), [&](int a, int b) {
-    const auto& sa =
-        std::find_if(d.ranking.order.begin(), d.ranking.order.end(), [&](const RankedCandidate& r) {
-          return r.candidate == a;
-        })->marginal;
-    const auto& sb =
-        std::find_if(d.ranking.order.begin(), d.ranking.order.end(), [&](const RankedCandidate& r) {
-          return r.candidate == b;
-        })->marginal;
-    const double ma =
-        sa.error.empty() ? sa.statistic / chi_square_quantile(0.01, std::max(1, sa.dof)) : -1;
-    const double mb =
-        sb.error.empty() ? sb.statistic / chi_square_quantile(0.01, std::max(1, sb.dof)) : -1;
-    return ma > mb;
-  });
+  const auto strength = [&](int c) {
+    const CandidateScore& x = marginal.at(c);
+    return x.error.empty() ? x.statistic / chi_square_quantile(0.01, std::max(1, x.dof)) : -1.0;
+  };
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return strength(a) > strength(b); });
   const int K = std::min<int>(d.settings.refits, static_cast<int>(order.size()));
   say(fmt::format("stage 3: refits of the top {} candidates", K));
   for (int r = 0; r < K && !stopped(); ++r) {
     const int c = order[r];
     const Candidate& cand = d.candidates[c];
-    const CandidateScore& score =
-        start_scores.count(c)
-            ? start_scores.at(c)
-            : std::find_if(d.ranking.order.begin(), d.ranking.order.end(),
-                           [&](const RankedCandidate& x) { return x.candidate == c; })
-                  ->marginal;
+    const CandidateScore& score = start_scores.count(c) ? start_scores.at(c) : marginal.at(c);
     RefitResult res;
     res.candidate = c;
     const std::string name = slug(cand);
@@ -513,7 +502,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                                       before * 1e6, after * 1e6, res.heldout_threshold * 1e6)));
     d.refits.push_back(res);
   }
-  d.seconds.refits = since(t0) - 0;
+  d.seconds.refits = since(t0);
 
   // ---- Verdict -------------------------------------------------------------------
   const bool judged_on_heldout = !d.settings.validate.empty();

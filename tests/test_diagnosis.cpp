@@ -92,23 +92,6 @@ std::string bar(const std::string& material, const std::string& tail, double end
   return test::shaken_bar_yaml(b);
 }
 
-/// Adds N(0, σ²) to every coordinate of a track file.
-std::string noisy(const std::string& file, const fs::path& out, double sigma, unsigned seed) {
-  MarkerTracks t = read_marker_tracks(file);
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> n(0, sigma);
-  std::string csv = "t";
-  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
-  csv += "\n";
-  for (long k = 0; k < t.xyz.cols(); ++k) {
-    csv += fmt::format("{:.12g}", t.times[k]);
-    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k) + n(rng));
-    csv += "\n";
-  }
-  test::write_text(out, csv);
-  return out.string();
-}
-
 // Every candidate switched on at its nominal value leaves Φ as it was: the nominal
 // model is inside each extended family.
 TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
@@ -154,9 +137,9 @@ TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
 /// A diagnosis scenario for the shaken bar whose tracks came from `truth` (with
 /// noise), a held-out motion of the same bar at other frequencies.
 fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned seed) {
-  const std::string train =
-      noisy(test::simulate_tracks(dir, "truth-train", bar(truth, test::kShakenBarMarkers)),
-            dir / "train.csv", 1e-5, seed);
+  const std::string train = test::noisy_tracks(
+      test::simulate_tracks(dir, "truth-train", bar(truth, test::kShakenBarMarkers)),
+      dir / "train.csv", 1e-5, seed);
   test::ShakenBar h;
   h.material = truth;
   h.end = 0.1;
@@ -169,8 +152,8 @@ fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned 
   h.amplitude_z = 0.003;
   h.tail = test::kShakenBarMarkers;
   const std::string held =
-      noisy(test::simulate_tracks(dir, "truth-heldout", test::shaken_bar_yaml(h)),
-            dir / "heldout.csv", 1e-5, seed + 1);
+      test::noisy_tracks(test::simulate_tracks(dir, "truth-heldout", test::shaken_bar_yaml(h)),
+                         dir / "heldout.csv", 1e-5, seed + 1);
   h.material = kNominal;
   h.tail = test::kShakenBarMarkers + "\n  observed: " + held + "\n";
   test::write_text(dir / "heldout.yaml", test::shaken_bar_yaml(h));

@@ -143,23 +143,6 @@ std::string bar(const std::string& material, const std::string& tail) {
   return test::shaken_bar_yaml(b);
 }
 
-/// Adds N(0, σ²) to every coordinate of a track file.
-std::string noisy(const std::string& file, const fs::path& out, double sigma, unsigned seed) {
-  MarkerTracks t = read_marker_tracks(file);
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> n(0, sigma);
-  std::string csv = "t";
-  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
-  csv += "\n";
-  for (long k = 0; k < t.xyz.cols(); ++k) {
-    csv += fmt::format("{:.12g}", t.times[k]);
-    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k) + n(rng));
-    csv += "\n";
-  }
-  test::write_text(out, csv);
-  return out.string();
-}
-
 // The model a user would fit, with the candidates switched off (all at 0).
 const std::string kExtended = R"(  density: 1100
   elastic:
@@ -205,8 +188,8 @@ TEST(ScoreScreening, RanksTheEffectInTheDataFirst) {
     - { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
     - { model: stiffening, c2: 3.0e5 }
   viscous: { model: newtonian, nu: 20 })";
-  const std::string tracks =
-      noisy(test::simulate_tracks(dir, "truth", bar(truth, kMarkers)), dir / "noisy.csv", 2e-6, 5);
+  const std::string tracks = test::noisy_tracks(
+      test::simulate_tracks(dir, "truth", bar(truth, kMarkers)), dir / "noisy.csv", 2e-6, 5);
   const auto s = screen(dir, tracks);
   ASSERT_EQ(s.size(), 3u);
   for (const auto& c : s) RecordProperty(c.name, fmt::format("{:.3g}", c.statistic));
@@ -220,8 +203,8 @@ TEST(ScoreScreening, RanksTheEffectInTheDataFirst) {
 TEST(ScoreScreening, FindsNoEffectWhereThereIsNone) {
   const fs::path dir = test::scratch("screen-none");
   const std::string tracks =
-      noisy(test::simulate_tracks(dir, "truth", bar(kNominalTruth, kMarkers)), dir / "noisy.csv",
-            2e-5, 7);
+      test::noisy_tracks(test::simulate_tracks(dir, "truth", bar(kNominalTruth, kMarkers)),
+                         dir / "noisy.csv", 2e-5, 7);
   const auto s = screen(dir, tracks);
   ASSERT_EQ(s.size(), 3u);
   for (const auto& c : s) {

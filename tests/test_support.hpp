@@ -7,8 +7,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <string>
 
+#include "engine/csv.hpp"
 #include "engine/simulation.hpp"
 #include "yaml/scenario.hpp"
 
@@ -108,6 +110,24 @@ inline std::string simulate_tracks(const fs::path& dir, const std::string& name,
   const SimulationResult r = run_simulation(load_scenario((dir / (name + ".yaml")).string()), o);
   if (!r.completed) throw std::runtime_error("truth simulation failed: " + r.error);
   return (dir / name / "markers.csv").string();
+}
+
+/// Adds N(0, σ²) to every coordinate of a track file.
+inline std::string noisy_tracks(const std::string& file, const fs::path& out, double sigma,
+                                unsigned seed) {
+  MarkerTracks t = read_marker_tracks(file);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0, sigma);
+  std::string csv = "t";
+  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
+  csv += "\n";
+  for (long k = 0; k < t.xyz.cols(); ++k) {
+    csv += fmt::format("{:.12g}", t.times[k]);
+    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k) + n(rng));
+    csv += "\n";
+  }
+  test::write_text(out, csv);
+  return out.string();
 }
 
 }  // namespace kelvin::test
