@@ -164,6 +164,7 @@ bool ExperimentRun::integrate_segments(
 }
 
 void ExperimentRun::expand(double t, const double* y, const double* yp) {
+  t_state = t;
   model.expand(t, y, y + n, x, v);
   model.expand_acceleration(t, yp + n, a);
 }
@@ -250,7 +251,7 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
 bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
   B.setZero(n, map.size());
   const auto& elements = model.elements();
-  return deriv.for_each(x, v, a, [&](int e, int s, const Vec12& dR) {
+  return deriv.for_each(t_state, x, v, a, [&](int e, int s, const Vec12& dR) {
     map.for_each_dependency(p, s, e, [&](int j, double dq) {
       for (int k = 0; k < 12; ++k)
         if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0) B(d, j) += dq * dR[k];
@@ -262,7 +263,7 @@ bool ExperimentRun::contract(const double* lambda, double scale, Eigen::Ref<Eige
                              const ElementTangents* cached) {
   const auto& elements = model.elements();
   return deriv.for_each(
-      x, v, a,
+      t_state, x, v, a,
       [&](int e, int s, const Vec12& dR) {
         double sum = 0;
         for (int k = 0; k < 12; ++k)
@@ -285,6 +286,7 @@ void ExperimentRun::factor_static_stiffness() {
   if (K0->info() != Eigen::Success)
     throw Error("the stiffness at the static initial state is singular");
   // ∂R/∂q at the static state: no velocity, no acceleration.
+  t_state = t0;
   x = xs;
   v.setZero(3, xs.cols());
   a.setZero(3, xs.cols());

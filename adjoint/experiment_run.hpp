@@ -29,6 +29,7 @@ struct ExperimentRun {
   double t0 = 0, t_end = 0;
   Eigen::VectorXd x0, v0;
   Eigen::Matrix3Xd x, v, a;  // full nodal fields of the last expand()
+  double t_state = 0;        // their time
 
   /// Observation parameters whose gradient this run integrates along with Φ
   /// (MarkerObjective's θ; 0 without a gradient or without observation blocks).

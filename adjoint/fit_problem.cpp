@@ -51,6 +51,19 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
   for (size_t e = 1; e < experiments_.size(); ++e) {
     const auto& other = experiments_[e]->model().terms();
     for (const ParamSlot& slot : map_->slots()) {
+      if (slot.is_clamp()) {
+        const auto& mine = experiments_[0]->model().clamps()[slot.clamp];
+        const auto& clamps = experiments_[e]->model().clamps();
+        if (slot.clamp >= static_cast<int>(clamps.size()) || clamps[slot.clamp].name != mine.name ||
+            !clamps[slot.clamp].compliant())
+          throw Error(fmt::format(
+              "{}: fit.experiments: {} fits the compliance of clamp '{}', which {} does not "
+              "have as its clamp {} with a compliance; experiments fitted jointly share the "
+              "fitted parameters",
+              scenario.path, scenario.path, mine.name, experiments_[e]->scenario().path,
+              slot.clamp));
+        continue;
+      }
       if (slot.is_density()) continue;
       const std::string mine = terms[slot.term].model->name();
       const std::string theirs =

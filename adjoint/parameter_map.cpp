@@ -13,10 +13,19 @@ namespace kelvin {
 namespace {
 
 ParamSlot resolve_target(const std::string& target, const Scenario& s, int line) {
+  if (const std::string name = clamp_of_compliance_target(target); !name.empty())
+    for (int c = 0; c < static_cast<int>(s.clamps.size()); ++c)
+      if (s.clamps[c].name == name && s.clamps[c].compliance > 0) return {-1, 0, c};
   const auto quantities = material_quantities(s.material);
   if (const MaterialQuantity* q = find_quantity(quantities, target)) return {q->term, q->index};
   throw Error(fmt::format("{}:{}: fit.parameters: '{}' is not a parameter of this model", s.path,
                           line, target));
+}
+
+/// The model's value of a slot in element e.
+double slot_value(const FemModel& model, const ParamSlot& slot, int e) {
+  if (slot.is_clamp()) return model.clamps()[slot.clamp].compliance;
+  return slot.is_density() ? model.density()[e] : model.terms()[slot.term].q(slot.index, e);
 }
 
 Eigen::Vector3d centroid(const Mesh& mesh, int e) {
@@ -204,10 +213,7 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
       // Start from the given value, else from the model's current value in the entry's elements.
       b.slot = resolve_target(spec.target, s, spec.line);
       for (int e = ne - 1; e >= 0; --e)
-        if (b.entry[e] >= 0)
-          b.initial[b.entry[e]] = b.slot.is_density()
-                                      ? model.density()[e]
-                                      : model.terms()[b.slot.term].q(b.slot.index, e);
+        if (b.entry[e] >= 0) b.initial[b.entry[e]] = slot_value(model, b.slot, e);
       if (spec.initial) b.initial.setConstant(*spec.initial);
       if (!b.log) b.scale = typical_scale(spec, s, b.initial);
     }
@@ -232,9 +238,7 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
       sb.shares_entries = k > 0;
       if (sb.is_multiplier()) {
         sb.nominal.resize(ne);
-        for (int e = 0; e < ne; ++e)
-          sb.nominal[e] = sb.slot.is_density() ? model.density()[e]
-                                               : model.terms()[sb.slot.term].q(sb.slot.index, e);
+        for (int e = 0; e < ne; ++e) sb.nominal[e] = slot_value(model, sb.slot, e);
       }
       blocks_.push_back(std::move(sb));
     }
@@ -244,7 +248,7 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
   value_block_.assign(nb, -1);
   multipliers_.assign(nb, {});
   auto same = [](const ParamSlot& a, const ParamSlot& b) {
-    return a.term == b.term && (a.is_density() || a.index == b.index);
+    return a.term == b.term && a.clamp == b.clamp && (!a.is_material() || a.index == b.index);
   };
   for (int k = 0; k < nb; ++k)
     for (int o = 0; o < nb; ++o) {
@@ -374,7 +378,9 @@ void ParameterMap::apply(const Eigen::VectorXd& p, FemModel& model) const {
     for (int e = 0; e < static_cast<int>(b.entry.size()); ++e) {
       if (b.entry[e] < 0) continue;
       const double q = element_value(p, s, e);
-      if (b.slot.is_density()) {
+      if (b.slot.is_clamp()) {
+        model.set_clamp_compliance(b.slot.clamp, q);  // one value: every entry holds it
+      } else if (b.slot.is_density()) {
         density[e] = q;
         density_changed = true;
       } else {

@@ -87,6 +87,13 @@ std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& 
   for (const auto& f : scenario.material.fields) columns.push_back({f.target, f.term, f.index});
   std::map<std::string, double> scalar;  // target → value now in the `material` node
   for (const auto& b : map.blocks()) {
+    if (b.slot.is_clamp()) {
+      // clamps[k] is the scenario's k-th entry; its compliance replaces either key.
+      YAML::Node clamp = yaml_child(root, "clamps")[b.slot.clamp];
+      clamp.remove("stiffness");
+      clamp["compliance"] = exact(model.clamps()[b.slot.clamp].compliance);
+      continue;
+    }
     const Column c{b.target, b.slot.term, b.slot.index};
     if (!scalar.count(c.target)) scalar[c.target] = scenario_value(scenario, model, c);
     // A multiplier field is written as the field it made: the fit section's start (a

@@ -1,7 +1,8 @@
 #pragma once
 /// \file
 /// The implicit first-order system handed to IDAS, y = (x, v) over the free dofs:
-///   F(t, y, y') = [ x' − v ;  M v' + M_fc a_c(t) + r(x, v) − f_ext ] = 0
+///   F(t, y, y') = [ x' − v ;  M v' + M_fc a_c(t) + r(x, v) − p_c(t) − f_ext ] = 0
+/// (p_c: the compliant clamps' pull, FemModel::clamp_pull)
 /// and its Newton matrix J = ∂F/∂y + c_j ∂F/∂y' = [ c_j I  −I ; K  c_j M + D ]
 /// as a 2n × 2n CSC matrix whose pattern is fixed (built from the FEM pattern once).
 #include <Eigen/Core>
@@ -52,7 +53,7 @@ class DaeSystem {
   const FemModel& model_;
   int n_;
   Eigen::Matrix3Xd x_, v_;
-  Eigen::VectorXd clamp_inertia_;
+  Eigen::VectorXd clamp_inertia_, clamp_pull_;
   AssemblyOutput out_;
   ElementTangents tangents_;
   std::vector<double> mass_diagonal_;  // lumped mass per free dof

@@ -81,14 +81,18 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
   elements_.reserve(ne);
   for (int e = 0; e < ne; ++e) elements_.push_back(make_tet_element(mesh, e));
 
-  clamp_of_node_.assign(nn, -1);
+  std::vector<int> holder(nn, -1);
   for (int c = 0; c < static_cast<int>(clamps_.size()); ++c)
     for (int node : clamps_[c].nodes) {
-      if (clamp_of_node_[node] >= 0)
+      if (holder[node] >= 0)
         throw Error(fmt::format("node {} belongs to clamps '{}' and '{}'", node,
-                                clamps_[clamp_of_node_[node]].name, clamps_[c].name));
-      clamp_of_node_[node] = c;
+                                clamps_[holder[node]].name, clamps_[c].name));
+      holder[node] = c;
     }
+  // A compliant clamp's nodes stay unknowns; only rigid clamps eliminate theirs.
+  clamp_of_node_.assign(nn, -1);
+  for (int a = 0; a < nn; ++a)
+    if (holder[a] >= 0 && !clamps_[holder[a]].compliant()) clamp_of_node_[a] = holder[a];
   dof_.assign(3 * nn, -1);
   for (int a = 0; a < nn; ++a)
     if (clamp_of_node_[a] < 0)
@@ -111,8 +115,93 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
     }
   }
   build_pattern();
+  for (int c = 0; c < static_cast<int>(clamps_.size()); ++c) {
+    if (!clamps_[c].compliant()) continue;
+    const auto faces = kelvin::clamp_faces(mesh_, clamps_[c].nodes, c);
+    if (faces.empty())
+      throw Error(fmt::format(
+          "clamp '{}' is compliant, and its nodes cover no boundary face for its springs to act "
+          "on",
+          clamps_[c].name));
+    clamp_faces_.insert(clamp_faces_.end(), faces.begin(), faces.end());
+  }
+  for (const auto& f : clamp_faces_)
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        for (int i = 0; i < 3; ++i)
+          clamp_face_entries_.push_back(pattern_.find(dof(f.nodes[a], i), dof(f.nodes[b], i)));
   build_mass();
   update_rest_tangents();
+}
+
+void FemModel::set_clamp_compliance(int clamp, double compliance) {
+  if (!clamps_.at(clamp).compliant() || !(compliance > 0))
+    throw Error(
+        fmt::format("clamp '{}': a compliance can be set only on a compliant clamp, and "
+                    "only to a positive value (got {})",
+                    clamps_.at(clamp).name, compliance));
+  clamps_[clamp].compliance = compliance;
+}
+
+void FemModel::add_clamp_springs(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                                 const AssemblyRequest& req, AssemblyOutput& out) const {
+  if (req.force)
+    for (const auto& f : clamp_faces_) {
+      const ClampBinding& c = clamps_[f.clamp];
+      for (int a = 0; a < 3; ++a) {
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int b = 0; b < 3; ++b)
+          sum += face_weight(f, a, b) * (x.col(f.nodes[b]) + c.damping_time * v.col(f.nodes[b])) /
+                 c.compliance;
+        for (int i = 0; i < 3; ++i) out.force[dof(f.nodes[a], i)] += sum[i];
+      }
+    }
+  add_clamp_spring_matrices(req.stiffness ? &out.K : nullptr, req.damping ? &out.D : nullptr);
+}
+
+void FemModel::add_clamp_spring_matrices(std::vector<double>* K, std::vector<double>* D) const {
+  const int* entry = clamp_face_entries_.data();
+  for (const auto& f : clamp_faces_) {
+    const ClampBinding& c = clamps_[f.clamp];
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        for (int i = 0; i < 3; ++i, ++entry) {
+          if (K) (*K)[*entry] += face_weight(f, a, b) / c.compliance;
+          if (D) (*D)[*entry] += face_weight(f, a, b) * c.damping_time / c.compliance;
+        }
+  }
+}
+
+double FemModel::clamp_spring_energy(double t, const Eigen::Matrix3Xd& x) const {
+  if (clamp_faces_.empty()) return 0;
+  const PosesAt poses(clamps_, t);
+  double energy = 0;
+  for (const auto& f : clamp_faces_) {
+    Eigen::Vector3d gap[3];
+    for (int a = 0; a < 3; ++a)
+      gap[a] = x.col(f.nodes[a]) - poses[f.clamp].position(mesh_.nodes.col(f.nodes[a]));
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        energy += 0.5 * face_weight(f, a, b) * gap[a].dot(gap[b]) / clamps_[f.clamp].compliance;
+  }
+  return energy;
+}
+
+void FemModel::clamp_pull(double t, bool with_velocity, Eigen::VectorXd& out) const {
+  out.setZero(n_);
+  if (clamp_faces_.empty()) return;
+  const PosesAt poses(clamps_, t);
+  for (const auto& f : clamp_faces_) {
+    const ClampBinding& c = clamps_[f.clamp];
+    for (int b = 0; b < 3; ++b) {
+      const Eigen::Vector3d X = mesh_.nodes.col(f.nodes[b]);
+      Eigen::Vector3d target = poses[f.clamp].position(X);
+      if (with_velocity) target += c.damping_time * poses[f.clamp].velocity(X);
+      target /= c.compliance;
+      for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < 3; ++i) out[dof(f.nodes[a], i)] += face_weight(f, a, b) * target[i];
+    }
+  }
 }
 
 std::pair<int, double> FemModel::most_compressed_element(const Eigen::Matrix3Xd& x) const {
@@ -486,6 +575,7 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
   }
   if (req.energy)
     for (int e = 0; e < ne; ++e) out.energy += elements_[e].volume * out.cell_energy[e];
+  if (!clamp_faces_.empty()) add_clamp_springs(x, v, req, out);
   return true;
 }
 
@@ -529,6 +619,7 @@ void FemModel::assemble_tangents(const ElementTangents& t, std::vector<double>& 
   D.resize(pattern_.nnz());
   gather(entry_ptr_, entry_src_, slots.matrix_a.data(), K.data());
   gather(entry_ptr_, entry_src_, slots.matrix_b.data(), D.data());
+  add_clamp_spring_matrices(&K, &D);
 }
 
 void FemModel::transpose_multiply(const ElementTangents& t, const double* lambda, double* Kt,
@@ -558,6 +649,17 @@ void FemModel::transpose_multiply(const ElementTangents& t, const double* lambda
   });
   gather(dof_ptr_, dof_src_, slots.vector_a.data(), Kt);
   gather(dof_ptr_, dof_src_, slots.vector_b.data(), Dt);
+  // The springs' S/c and dashpots' τ S/c are symmetric: Sᵀλ = Sλ.
+  for (const auto& f : clamp_faces_) {
+    const ClampBinding& c = clamps_[f.clamp];
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        for (int i = 0; i < 3; ++i) {
+          const double l = lambda[dof(f.nodes[b], i)], w = face_weight(f, a, b);
+          Kt[dof(f.nodes[a], i)] += w / c.compliance * l;
+          Dt[dof(f.nodes[a], i)] += w * c.damping_time / c.compliance * l;
+        }
+  }
 }
 
 double FemModel::kinetic_energy(const Eigen::Matrix3Xd& v) const {

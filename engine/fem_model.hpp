@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/clamp_spring.hpp"
 #include "engine/element.hpp"
 #include "engine/mesh.hpp"
 #include "engine/rigid_motion.hpp"
@@ -34,6 +35,11 @@ struct ClampBinding {
   std::string name;
   std::vector<int> nodes;
   std::shared_ptr<const RigidMotion> motion;
+  /// > 0: a compliant clamp (engine/clamp_spring.hpp) whose nodes are unknowns held
+  /// by pads of compliance c (m³/N) and retardation time τ (s); 0: rigid.
+  double compliance = 0;
+  double damping_time = 0;
+  bool compliant() const { return compliance > 0; }
 };
 
 /// A constant load carried by a set of nodes in equal shares: a force (N, total)
@@ -160,6 +166,18 @@ class FemModel {
   /// M_fc a_c: inertia of the free dofs coupled to clamp accelerations (zero for
   /// lumped mass, where M has no free–clamped entries).
   void clamp_inertia(double t, Eigen::VectorXd& out) const;
+  /// The compliant clamps' pull toward their motion over the free dofs,
+  /// Σ S (x̂(t) + τ v̂(t))/c (v̂ only `with_velocity`): the part of their pads' force
+  /// that does not depend on the state, which the residual subtracts (assemble() adds
+  /// the part Σ S (x + τ v)/c that does).
+  void clamp_pull(double t, bool with_velocity, Eigen::VectorXd& out) const;
+  /// Elastic energy of the pads, ½ Σ (x − x̂)ᵀ S (x − x̂)/c: apart from assemble()'s
+  /// energy, which it would swamp (a stiff pad's ½ xᵀ S x/c is 10¹² times the body's).
+  double clamp_spring_energy(double t, const Eigen::Matrix3Xd& x) const;
+  /// The faces the compliant clamps hold, in element order.
+  const std::vector<ClampFace>& clamp_faces() const { return clamp_faces_; }
+  /// Sets a compliant clamp's compliance (> 0).
+  void set_clamp_compliance(int clamp, double compliance);
   /// y += M x over the free dofs.
   void mass_multiply(const double* x, double* y) const;
 
@@ -203,6 +221,10 @@ class FemModel {
   void build_pattern();
   void build_gather_plan();
   void build_mass();
+  /// Adds the compliant clamps' state-dependent spring and dashpot terms.
+  void add_clamp_springs(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                         const AssemblyRequest& req, AssemblyOutput& out) const;
+  void add_clamp_spring_matrices(std::vector<double>* K, std::vector<double>* D) const;
   /// Sums element slots into global values: out[d] = Σ slots[src] over gather list d.
   void gather(const std::vector<int>& ptr, const std::vector<int>& src, const double* slots,
               double* out) const;
@@ -236,6 +258,8 @@ class FemModel {
   Eigen::VectorXd node_mass_;          // lumped nodal masses (all nodes, attached masses included)
   Eigen::VectorXd f_external_;
   std::vector<int> clamp_coupled_elements_;  // elements with free and clamped nodes
+  std::vector<ClampFace> clamp_faces_;       // of the compliant clamps
+  std::vector<int> clamp_face_entries_;      // per face 3 × 3 node pairs: K's diagonal-block entry
   std::vector<Mat9> rest_tangent_;           // per element, only when some term needs it
 };
 

@@ -46,10 +46,14 @@ ParamDerivatives::ParamDerivatives(const FemModel& model, std::vector<ParamSlot>
   const auto& terms = model_.terms();
   for (int t = 0; t < static_cast<int>(terms.size()); ++t)
     if (terms[t].model->needs_rest_tangent()) rest_tangent_users_.push_back(t);
-  for (const auto& s : slots_)
-    if (!s.is_density() && (s.term >= static_cast<int>(terms.size()) ||
+  for (const auto& s : slots_) {
+    if (s.is_material() && (s.term >= static_cast<int>(terms.size()) ||
                             s.index >= static_cast<int>(terms[s.term].model->params().size())))
       throw Error("parameter slot refers to a material parameter that does not exist");
+    if (s.is_clamp() && (s.clamp >= static_cast<int>(model_.clamps().size()) ||
+                         !model_.clamps()[s.clamp].compliant()))
+      throw Error("parameter slot refers to a compliance of a clamp that is not compliant");
+  }
   update();
 }
 
@@ -59,14 +63,14 @@ void ParamDerivatives::update() {
   const auto& terms = model_.terms();
   const int ne = model_.mesh().num_tets();
   for (size_t s = 0; s < slots_.size(); ++s) {
-    if (slots_[s].is_density() || terms[slots_[s].term].model->is_viscous()) continue;
+    if (!slots_[s].is_material() || terms[slots_[s].term].model->is_viscous()) continue;
     dC0_[s].resize(ne);
     for (int e = 0; e < ne; ++e)
       dC0_[s][e] = rest_tangent_param_derivative(terms[slots_[s].term], e, slots_[s].index);
   }
 }
 
-bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                                 const Eigen::Matrix3Xd& a, const Visitor& visit,
                                 const ElementTangents* cached) const {
   const auto& terms = model_.terms();
@@ -79,7 +83,7 @@ bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
   if (cached && cached->dPdq.empty()) cached = nullptr;
   std::vector<char> needed(nt, 0);
   for (const auto& s : slots_)
-    if (!s.is_density()) needed[s.term] = 1;
+    if (s.is_material()) needed[s.term] = 1;
   Eigen::Matrix<double, 3, 4> xe, ve, ae;
   Vec12 dR;
   for (int e = 0; e < model_.mesh().num_tets(); ++e) {
@@ -110,6 +114,7 @@ bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
     const Vec12 ve_flat = ve.reshaped();
     for (int s = 0; s < static_cast<int>(slots_.size()); ++s) {
       const ParamSlot& slot = slots_[s];
+      if (slot.is_clamp()) continue;  // below, face by face
       if (slot.is_density()) {
         // M_e is linear in ρ_e: ∂R/∂ρ_e = (M_e/ρ_e)(a − g + α₀ v), gravity being M g.
         Eigen::Matrix<double, 3, 4> rhs = ae + mass_damping * ve;
@@ -134,7 +139,33 @@ bool ParamDerivatives::for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
       visit(e, s, dR);
     }
   }
+  for (int s = 0; s < static_cast<int>(slots_.size()); ++s)
+    if (slots_[s].is_clamp()) clamp_compliance_derivative(t, x, v, s, visit);
   return true;
+}
+
+void ParamDerivatives::clamp_compliance_derivative(double t, const Eigen::Matrix3Xd& x,
+                                                   const Eigen::Matrix3Xd& v, int s,
+                                                   const Visitor& visit) const {
+  // The pads' force Σ_b S_ab (g_b + τ ġ_b)/c, g = x − x̂: its c-derivative is
+  // −Σ_b S_ab (g_b + τ ġ_b)/c².
+  const ClampBinding& clamp = model_.clamps()[slots_[s].clamp];
+  const RigidPose pose = clamp.motion->at(t);
+  const double c2 = clamp.compliance * clamp.compliance;
+  for (const ClampFace& f : model_.clamp_faces()) {
+    if (f.clamp != slots_[s].clamp) continue;
+    Eigen::Vector3d gap[3];
+    for (int b = 0; b < 3; ++b) {
+      const Eigen::Vector3d X = model_.mesh().nodes.col(f.nodes[b]);
+      gap[b] = x.col(f.nodes[b]) - pose.position(X) +
+               clamp.damping_time * (v.col(f.nodes[b]) - pose.velocity(X));
+    }
+    Vec12 dR = Vec12::Zero();
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        dR.segment<3>(3 * f.local[a]) -= face_weight(f, a, b) * gap[b] / c2;
+    visit(f.element, s, dR);
+  }
 }
 
 }  // namespace kelvin

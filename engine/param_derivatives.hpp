@@ -3,7 +3,8 @@
 /// Derivatives of the momentum residual
 ///   R(t, x, v, v'; q) = M v' + M_fc a_c + r(x, v) − f_ext
 /// with respect to per-element model quantities ("slots"): a material parameter of
-/// one term, or the density. Both gradient methods consume them: forward
+/// one term, the density, or a compliant clamp's compliance (one value, visited on
+/// the elements its faces bound). Both gradient methods consume them: forward
 /// sensitivities scatter ∂R/∂q_e into a residual, the adjoint contracts it with λ.
 ///
 /// Everything is closed-form from the material's dP/dq, except where a term's
@@ -21,9 +22,12 @@
 namespace kelvin {
 
 struct ParamSlot {
-  int term = -1;  // material term index into FemModel::terms(); −1 = density
-  int index = 0;  // parameter index within the term
-  bool is_density() const { return term < 0; }
+  int term = -1;   // material term index into FemModel::terms(); −1 = density
+  int index = 0;   // parameter index within the term
+  int clamp = -1;  // ≥ 0: the compliance of that (compliant) clamp
+  bool is_density() const { return term < 0 && clamp < 0; }
+  bool is_clamp() const { return clamp >= 0; }
+  bool is_material() const { return term >= 0; }
 };
 
 using Vec12 = Eigen::Matrix<double, 12, 1>;
@@ -38,16 +42,19 @@ class ParamDerivatives {
 
   /// Calls visit(e, s, dR) for every element e and slot s, with dR = ∂R_e/∂q_{s,e}
   /// over the element's 12 node dofs (clamped ones included; callers skip them).
-  /// x, v, a are full nodal fields. False when a material rejects the state.
+  /// x, v, a are full nodal fields at time t. False when a material rejects the state.
   /// `cached`, when it holds dP/dq (FemModel::element_tangents with
   /// param_derivatives) at this x and v, is used instead of evaluating the materials.
   using Visitor = std::function<void(int e, int s, const Vec12& dR)>;
-  bool for_each(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const Eigen::Matrix3Xd& a,
-                const Visitor& visit, const ElementTangents* cached = nullptr) const;
+  bool for_each(double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                const Eigen::Matrix3Xd& a, const Visitor& visit,
+                const ElementTangents* cached = nullptr) const;
 
  private:
   const FemModel& model_;
   std::vector<ParamSlot> slots_;
+  void clamp_compliance_derivative(double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                                   int s, const Visitor& visit) const;
   std::vector<int> rest_tangent_users_;  // viscous terms whose stress uses C₀
   // ∂C₀/∂q per element for each slot that is an elastic parameter (empty otherwise)
   std::vector<std::vector<Mat9>> dC0_;

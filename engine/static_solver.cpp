@@ -14,6 +14,7 @@ struct Residual {
   double t;
   Eigen::Matrix3Xd x, v;
   AssemblyOutput out;
+  Eigen::VectorXd pull;
 
   /// r(x) − s f_ext, and the potential energy W(x) − s f_ext·x when `energy`;
   /// false when an element is inadmissible at x.
@@ -24,8 +25,12 @@ struct Residual {
     req.stiffness = tangent;
     req.energy = energy != nullptr;
     if (!model.assemble(x, v, req, out)) return false;
-    g = out.force - s * model.external_force();
-    if (energy) *energy = out.energy - s * model.external_force().dot(xf);
+    // A compliant clamp's pull holds the body at every load step: it is a support,
+    // not a load.
+    model.clamp_pull(t, false, pull);
+    g = out.force - pull - s * model.external_force();
+    if (energy)
+      *energy = out.energy + model.clamp_spring_energy(t, x) - s * model.external_force().dot(xf);
     return true;
   }
 };
@@ -44,7 +49,7 @@ Eigen::VectorXd rigid_initial_guess(const FemModel& model, double t) {
 StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_free,
                           const StaticOptions& opt) {
   StaticResult res;
-  Residual R{model, t, {}, {}, {}};
+  Residual R{model, t, {}, {}, {}, {}};
   Eigen::VectorXd g, g_trial, x_trial;
   if (!R.eval(x_free, 1.0, false, g)) {
     res.message =

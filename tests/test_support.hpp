@@ -65,6 +65,7 @@ struct ShakenBar {
   double frequency_y = 17, frequency_z = 13;        // Hz
   double end = 0.1, output_rate = 200;              // s, Hz
   double rtol = 1e-9, atol = 1e-13;
+  std::string clamp_keys;  // more keys of the clamp's entry, e.g. "compliance: 1e-7"
   std::string tail;
 };
 
@@ -87,6 +88,7 @@ initial: static
 clamps:
   - name: base
     select: {{ plane: {{ axis: x, at: 0 }} }}
+    {}
     motion:
       sinusoids:
         translation:
@@ -95,8 +97,8 @@ clamps:
 time: {{ end: {}, output_rate: {} }}
 solver: {{ rtol: {}, atol: {} }}
 )",
-                     b.name, b.material, b.amplitude_y, b.frequency_y, b.amplitude_z, b.frequency_z,
-                     b.end, b.output_rate, b.rtol, b.atol) +
+                     b.name, b.material, b.clamp_keys, b.amplitude_y, b.frequency_y, b.amplitude_z,
+                     b.frequency_z, b.end, b.output_rate, b.rtol, b.atol) +
          b.tail;
 }
 

@@ -77,6 +77,8 @@ struct ClampSpec {
   NodeSelection selection;
   std::vector<int> nodes;               // resolved, non-empty
   std::shared_ptr<RigidMotion> motion;  // FixedMotion when none is given
+  double compliance = 0;                // m³/N; > 0: held by springs (ClampBinding)
+  double damping_time = 0;              // s, the pads' retardation time, with compliance only
 };
 
 /// `loads:` entry: a constant force and/or an attached mass carried by the
@@ -130,6 +132,15 @@ inline const char* kRegistration = "markers.registration";
 /// The marker a `markers.<name>.offset` target names, or "" when it is not one.
 inline std::string marker_of_offset_target(const std::string& target) {
   const std::string prefix = "markers.", suffix = ".offset";
+  if (target.size() <= prefix.size() + suffix.size() || target.rfind(prefix, 0) != 0 ||
+      target.compare(target.size() - suffix.size(), suffix.size(), suffix) != 0)
+    return "";
+  return target.substr(prefix.size(), target.size() - prefix.size() - suffix.size());
+}
+
+/// The clamp a `clamps.<name>.compliance` target names, or "" when it is not one.
+inline std::string clamp_of_compliance_target(const std::string& target) {
+  const std::string prefix = "clamps.", suffix = ".compliance";
   if (target.size() <= prefix.size() + suffix.size() || target.rfind(prefix, 0) != 0 ||
       target.compare(target.size() - suffix.size(), suffix.size(), suffix) != 0)
     return "";

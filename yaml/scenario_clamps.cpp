@@ -8,6 +8,7 @@
 #include <map>
 #include <set>
 
+#include "engine/clamp_spring.hpp"
 #include "engine/csv.hpp"
 #include "engine/error.hpp"
 #include "yaml/scenario_sections.hpp"
@@ -184,6 +185,33 @@ void select_entry_nodes(const Doc& d, const Node& entry, const std::string& P, c
   if (nodes.empty()) d.fail(sel, join(P, "select"), explain_empty(selection, mesh));
 }
 
+/// A compliant clamp's springs: `compliance` (m³/N) or `stiffness` (N/m³, per area of
+/// the held faces), and an optional `damping_time` (s).
+void load_compliance(const Doc& d, const Node& c, const std::string& P, ClampSpec& spec) {
+  if (c["compliance"] && c["stiffness"])
+    d.fail(c["stiffness"], join(P, "stiffness"),
+           "give 'compliance' or 'stiffness' (its inverse), not both");
+  for (const char* key : {"compliance", "stiffness"})
+    if (const Node k = c[key]) {
+      const double v = d.number(k, join(P, key));
+      if (!(v > 0) || !std::isfinite(v) || 1 / v == 0)
+        d.fail(k, join(P, key),
+               fmt::format("must be positive and finite (got {:g}); a rigid clamp has neither "
+                           "key",
+                           v));
+      spec.compliance = std::string(key) == "compliance" ? v : 1 / v;
+    }
+  if (const Node k = c["damping_time"]) {
+    if (spec.compliance == 0)
+      d.fail(k, join(P, "damping_time"),
+             "a dashpot acts beside the clamp's springs: give 'compliance' or 'stiffness' too");
+    spec.damping_time = d.number(k, join(P, "damping_time"));
+    if (!(spec.damping_time >= 0) || !std::isfinite(spec.damping_time))
+      d.fail(k, join(P, "damping_time"),
+             fmt::format("must be zero or positive and finite (got {:g})", spec.damping_time));
+  }
+}
+
 }  // namespace
 
 std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh,
@@ -194,7 +222,7 @@ std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh
   for (size_t k = 0; k < n.size(); ++k) {
     const Node c = n[k];
     const std::string P = index("clamps", k);
-    d.check_keys(c, P, {"name", "select", "motion"});
+    d.check_keys(c, P, {"name", "select", "motion", "compliance", "stiffness", "damping_time"});
     ClampSpec spec;
     spec.name = unique_name(d, c, P, "clamp", k, clamps);
     select_entry_nodes(d, c, P, mesh, spec.selection, spec.nodes);
@@ -219,6 +247,11 @@ std::vector<ClampSpec> load_clamps(const Doc& d, const Node& n, const Mesh& mesh
       else
         spec.motion = load_motion_file(d, m["file"], join(MP, "file"), time);
     }
+    load_compliance(d, c, P, spec);
+    if (spec.compliance > 0 && clamp_faces(mesh, spec.nodes, 0).empty())
+      d.fail(c["select"], join(P, "select"),
+             "a compliant clamp's springs act on the boundary faces its nodes cover, and "
+             "these nodes cover none");
     clamps.push_back(std::move(spec));
   }
   return clamps;

@@ -29,7 +29,8 @@ struct TargetInfo {
   double lower = -1e300, upper = 1e300;             // admissible range
   double default_lower = NAN, default_upper = NAN;  // default bounds (NaN: the range)
   bool positive = false;
-  double current = 0;  // the scenario's value, the default start
+  double current = 0;   // the scenario's value, the default start
+  bool scalar = false;  // one value for the whole model (global scope only)
 };
 
 std::vector<std::string> valid_targets(const std::vector<MaterialQuantity>& quantities) {
@@ -39,6 +40,7 @@ std::vector<std::string> valid_targets(const std::vector<MaterialQuantity>& quan
   names.push_back(kClockOffset);
   names.push_back(kRegistration);
   names.push_back("markers.<name>.offset");
+  names.push_back("clamps.<name>.compliance");
   return names;
 }
 
@@ -64,6 +66,26 @@ TargetInfo resolve_target(const Doc& d, const Node& at, const std::string& P,
     t.default_upper = -t.default_lower;
     t.positive = false;
     t.current = 0;
+    t.scalar = true;
+    return t;
+  }
+  if (const std::string name = clamp_of_compliance_target(target); !name.empty()) {
+    const auto clamp = std::find_if(s.clamps.begin(), s.clamps.end(),
+                                    [&](const ClampSpec& c) { return c.name == name; });
+    if (clamp == s.clamps.end())
+      d.fail(at, P, fmt::format("'{}' names no clamp of this scenario (clamps)", target));
+    if (clamp->compliance <= 0)
+      d.fail(at, P,
+             fmt::format("clamp '{}' is rigid; give it a 'compliance' (or 'stiffness') to fit "
+                         "its compliance from",
+                         name));
+    TargetInfo t;
+    t.name = target;
+    t.unit = "m³/N";
+    t.lower = 1e-300;  // 0 would be the rigid clamp, which has no springs to soften
+    t.positive = true;
+    t.current = clamp->compliance;
+    t.scalar = true;
     return t;
   }
   if (target == kElasticModuli) {
@@ -310,6 +332,9 @@ FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& 
     }
   }
 
+  if (info.scalar && spec.scope != Scope::Global)
+    d.fail(n["scope"], join(P, "scope"),
+           fmt::format("{} is one value for the whole model: its scope is global", what));
   // Without `initial` the fit starts from the scenario's own value.
   if (!spec.initial) {
     if (info.current < spec.lower || info.current > spec.upper)
