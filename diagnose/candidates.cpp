@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "engine/clamp_spring.hpp"
+
 namespace kelvin {
 namespace {
 
@@ -46,6 +48,33 @@ YAML::Node fibre(const Eigen::Vector3d& a) {
                         {"phi", std::atan2(d.y(), d.x())}});
 }
 
+/// The pads of a clamp_compliance candidate (engine/clamp_spring.hpp).
+struct ClampPads {
+  double scale = 0;         // m³/N: a tenth of the body's own compliance L/M
+  double rigid = 0;         // m³/N: the nominal, 10⁻⁵ of that: the clamp face sinks nanometres
+  double damping_time = 0;  // s
+};
+
+/// The body's compliance L/M (L its length, M its largest modulus) sets the scale;
+/// the pads' retardation time is 1/20 rad at the capture's Nyquist frequency: it keeps
+/// the stiff nominal pad overdamped (τ² ≫ 4 c m/A) while its phase lag on the
+/// captured motion stays below 0.05 rad.
+ClampPads nested_pads(const Scenario& s) {
+  const Eigen::Vector3d extent =
+      s.mesh.nodes.rowwise().maxCoeff() - s.mesh.nodes.rowwise().minCoeff();
+  double modulus = 0;
+  for (const auto& q : material_quantities(s.material))
+    if (q.info.unit == "Pa") modulus = std::max(modulus, std::abs(q.value));
+  ClampPads p;
+  p.scale = 0.1 * extent.maxCoeff() / std::max(modulus, 1e-300);
+  p.rigid = 1e-5 * p.scale;
+  const auto& times = s.markers.observed.times;
+  const double rate =
+      times.size() > 1 ? (times.size() - 1) / (times.back() - times.front()) : s.time.output_rate;
+  p.damping_time = 0.05 / (2 * M_PI * 0.5 * rate);
+  return p;
+}
+
 }  // namespace
 
 BodyAxis body_axis(const Scenario& s) {
@@ -83,17 +112,14 @@ std::vector<Eigen::Vector3d> screening_directions() {
 }
 
 const std::vector<std::string>& candidate_ids() {
-  static const std::vector<std::string> ids = {"stiffening",    "damping_law",   "drag",
-                                               "inhomogeneity", "added_mass",    "anisotropy",
-                                               "sync_lag",      "marker_offset", "registration"};
+  static const std::vector<std::string> ids = {
+      "stiffening", "damping_law", "drag",          "inhomogeneity", "added_mass",
+      "anisotropy", "sync_lag",    "marker_offset", "registration",  "clamp_compliance"};
   return ids;
 }
 
 const std::vector<std::pair<std::string, std::string>>& unavailable_candidates() {
   static const std::vector<std::pair<std::string, std::string>> u = {
-      {"clamp_compliance",
-       "a compliant clamp (clamped nodes as unknowns held by distributed springs) is not built "
-       "yet"},
       {"relaxation", "a relaxing (Prony / standard-linear-solid) viscous term is not built yet"},
       {"discretisation",
        "judged by a mesh-refinement study (study_coarsening), not screened per case"},
@@ -108,7 +134,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   Candidate stiffening;
   stiffening.id = "stiffening";
   stiffening.description = "a Yeoh-like stiffening term c₂ (I₁ − 3 − 2 ln J)²";
-  stiffening.extend = [](const Candidate&, MaterialLists& m, YAML::Node& params, bool) {
+  stiffening.extend = [](const Candidate&, ModelEdits& m, YAML::Node& params, bool) {
     const int k = append(m.elastic, term("stiffening", {{"c2", 0.0}}));
     params.push_back(parameter(fmt::format("elastic[{}].c2", k), 0.0));
   };
@@ -124,7 +150,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
     law.description = "a power-law viscosity (flow index h, 1 = the Newtonian nominal)";
     const int k = static_cast<int>(newtonian - viscous.begin());
     const double nu = newtonian->params.at("nu");
-    law.extend = [k, nu](const Candidate&, MaterialLists& m, YAML::Node& params, bool) {
+    law.extend = [k, nu](const Candidate&, ModelEdits& m, YAML::Node& params, bool) {
       m.viscous[k] = term("power-law", {{"nu", nu}, {"h", 1.0}});
       params.push_back(parameter(fmt::format("viscous[{}].h", k)));
     };
@@ -134,7 +160,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   Candidate drag;
   drag.id = "drag";
   drag.description = "a mass-proportional drag force −c ρ v (air drag, Rayleigh α₀)";
-  drag.extend = [](const Candidate&, MaterialLists& m, YAML::Node& params, bool) {
+  drag.extend = [](const Candidate&, ModelEdits& m, YAML::Node& params, bool) {
     const int k = append(m.viscous, term("drag", {{"c", 0.0}}));
     params.push_back(parameter(fmt::format("viscous[{}].c", k), 0.0));
   };
@@ -143,7 +169,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   Candidate inhomogeneity;
   inhomogeneity.id = "inhomogeneity";
   inhomogeneity.description = "a stiffness that varies along the body (Legendre P₁–P₃ field)";
-  inhomogeneity.extend = [axis](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+  inhomogeneity.extend = [axis](const Candidate&, ModelEdits&, YAML::Node& params, bool) {
     params.push_back(legendre_field(kElasticModuli, axis));
   };
   out.push_back(inhomogeneity);
@@ -151,7 +177,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   Candidate mass;
   mass.id = "added_mass";
   mass.description = "a density that varies along the body (Legendre P₁–P₃ field)";
-  mass.extend = [axis](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+  mass.extend = [axis](const Candidate&, ModelEdits&, YAML::Node& params, bool) {
     params.push_back(legendre_field("density", axis));
   };
   out.push_back(mass);
@@ -159,8 +185,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   Candidate anisotropy;
   anisotropy.id = "anisotropy";
   anisotropy.description = "a fibre term k/2 (‖F a‖² − 1)² along a direction a";
-  anisotropy.extend = [](const Candidate& self, MaterialLists& m, YAML::Node& params,
-                         bool screening) {
+  anisotropy.extend = [](const Candidate& self, ModelEdits& m, YAML::Node& params, bool screening) {
     if (screening) {
       for (const auto& a : screening_directions()) {
         const int k = append(m.elastic, fibre(a));
@@ -175,12 +200,33 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   };
   out.push_back(anisotropy);
 
+  for (int k = 0; k < static_cast<int>(s.clamps.size()); ++k) {
+    const ClampSpec& clamp = s.clamps[k];
+    if (clamp.compliance > 0 || clamp_faces(s.mesh, clamp.nodes, k).empty()) continue;
+    Candidate soft;
+    soft.id = "clamp_compliance";
+    soft.where = s.clamps.size() > 1 ? clamp.name : "";
+    soft.description = fmt::format("clamp '{}' holds the body through compliant pads", clamp.name);
+    const ClampPads pads = nested_pads(s);
+    const std::string target = fmt::format("clamps.{}.compliance", clamp.name);
+    soft.extend = [k, pads, target](const Candidate&, ModelEdits& m, YAML::Node& params, bool) {
+      m.clamps[k]["compliance"] = pads.rigid;
+      m.clamps[k]["damping_time"] = pads.damping_time;
+      YAML::Node p = parameter(target, pads.rigid);
+      p["log"] = false;
+      p["scale"] = pads.scale;
+      p["upper"] = 10 * pads.scale;
+      params.push_back(p);
+    };
+    out.push_back(soft);
+  }
+
   if (!s.markers.observed.names.empty()) {
     Candidate lag;
     lag.id = "sync_lag";
     lag.where = "marker clock";
     lag.description = "an offset between the marker clock and the clamp log";
-    lag.extend = [](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+    lag.extend = [](const Candidate&, ModelEdits&, YAML::Node& params, bool) {
       params.push_back(parameter(kClockOffset));
     };
     out.push_back(lag);
@@ -193,7 +239,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
     offset.where = m.name;
     offset.description = fmt::format("marker {} sits away from its given rest position", m.name);
     const std::string target = fmt::format("markers.{}.offset", m.name);
-    offset.extend = [target](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+    offset.extend = [target](const Candidate&, ModelEdits&, YAML::Node& params, bool) {
       params.push_back(parameter(target));
     };
     out.push_back(offset);
@@ -203,7 +249,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
     reg.id = "registration";
     reg.where = "capture frame";
     reg.description = "a rigid misregistration of the capture frame against the model's";
-    reg.extend = [](const Candidate&, MaterialLists&, YAML::Node& params, bool) {
+    reg.extend = [](const Candidate&, ModelEdits&, YAML::Node& params, bool) {
       params.push_back(parameter(kRegistration));
     };
     out.push_back(reg);

@@ -15,9 +15,11 @@
 
 namespace kelvin {
 
-/// The material's term lists as sequences, to which candidates append.
-struct MaterialLists {
+/// The parts of the scenario's YAML that candidates edit: the material's term lists
+/// as sequences, to which they append, and the clamps.
+struct ModelEdits {
   YAML::Node elastic, viscous;         // sequences of term mappings
+  YAML::Node clamps;                   // the `clamps:` sequence (undefined without one)
   const MaterialSpec* spec = nullptr;  // the nominal material as loaded
 };
 
@@ -30,7 +32,7 @@ struct Candidate {
   /// Adds the candidate's terms to `material` and its parameter entries (mappings)
   /// to `parameters`. `screening`: the form scored at the nominal fit (the
   /// anisotropy's moduli along fixed directions) rather than the one refitted.
-  std::function<void(const Candidate& self, MaterialLists& material, YAML::Node& parameters,
+  std::function<void(const Candidate& self, ModelEdits& material, YAML::Node& parameters,
                      bool screening)>
       extend;
 };

@@ -397,8 +397,15 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     return x.error.empty() ? x.statistic / chi_square_quantile(0.01, std::max(1, x.dof)) : -1.0;
   };
   std::sort(order.begin(), order.end(), [&](int a, int b) { return strength(a) > strength(b); });
-  const int K = std::min<int>(d.settings.refits, static_cast<int>(order.size()));
-  say(fmt::format("stage 3: refits of the top {} candidates", K));
+  // Refit those whose marginal score clears its threshold; when none does, the top one
+  // alone, in case its effect is too far from linear for the local test (a long lag).
+  int passing = 0;
+  for (const auto& rc : d.ranking.order)
+    passing += rc.marginal.error.empty() && rc.marginal.statistic > rc.threshold;
+  const int K =
+      std::min<int>({d.settings.refits, static_cast<int>(order.size()), std::max(passing, 1)});
+  say(fmt::format("stage 3: refits of the top {} candidates ({} cleared the screening threshold)",
+                  K, passing));
   for (int r = 0; r < K && !stopped(); ++r) {
     const int c = order[r];
     const Candidate& cand = d.candidates[c];

@@ -39,9 +39,10 @@ ExtendedScenario write_extended_scenario(const std::string& source, const Scenar
   absolute_scenario_paths(root, doc);
   root.remove("diagnose");
   YAML::Node material = root["material"];
-  MaterialLists lists;
+  ModelEdits lists;
   lists.elastic = as_sequence(yaml_child(material, "elastic"));
   lists.viscous = as_sequence(yaml_child(material, "viscous"));
+  lists.clamps = root["clamps"];
   lists.spec = &nominal.material;
 
   ExtendedScenario out;
