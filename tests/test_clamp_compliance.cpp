@@ -54,6 +54,16 @@ Eigen::Matrix3Xd static_positions(const fs::path& dir, const std::string& name,
   return x;
 }
 
+/// The shaken bar of test_support with its markers, clamp rigid.
+test::ShakenBar shaken_bar() {
+  test::ShakenBar b;
+  b.material =
+      "  density: 1100\n  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }\n"
+      "  viscous: { model: newtonian, nu: 20 }";
+  b.tail = test::kShakenBarMarkers;
+  return b;
+}
+
 std::string refusal(const fs::path& dir, const std::string& yaml) {
   test::write_text(dir / "bad.yaml", yaml);
   try {
@@ -109,11 +119,7 @@ TEST(ClampCompliance, AHangingBarsClampFaceSinksByItsWeightOverTheSpringStiffnes
 
 TEST(ClampCompliance, ATinyComplianceReproducesTheRigidClampAndAModerateOneDoesNot) {
   const fs::path dir = test::scratch("clamp-compliance-limit");
-  test::ShakenBar b;
-  b.material =
-      "  density: 1100\n  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }\n"
-      "  viscous: { model: newtonian, nu: 20 }";
-  b.tail = test::kShakenBarMarkers;
+  test::ShakenBar b = shaken_bar();
   const MarkerTracks rigid =
       read_marker_tracks(test::simulate_tracks(dir, "rigid", test::shaken_bar_yaml(b)));
   b.clamp_keys = "compliance: 1.0e-13\n    damping_time: 1.0e-4";
@@ -133,11 +139,7 @@ TEST(ClampCompliance, ATinyComplianceReproducesTheRigidClampAndAModerateOneDoesN
 
 TEST(ClampCompliance, TheComplianceGradientAgreesThreeWays) {
   const fs::path dir = test::scratch("clamp-compliance-gradient");
-  test::ShakenBar b;
-  b.material =
-      "  density: 1100\n  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }\n"
-      "  viscous: { model: newtonian, nu: 20 }";
-  b.tail = test::kShakenBarMarkers;
+  test::ShakenBar b = shaken_bar();
   const std::string tracks = test::simulate_tracks(dir, "truth", test::shaken_bar_yaml(b));
   b.clamp_keys = "compliance: 1.5e-7\n    damping_time: 2.0e-4";
   b.tail = test::kShakenBarMarkers + "\n  observed: " + tracks + "\n";
