@@ -119,7 +119,9 @@ Capture read_motive_csv(const std::string& path) {
 
   double t_first = 0;
   for (int k = 0; k < frames; ++k) {
-    const auto& [line, row] = rows[axis_row + 1 + k];
+    // Named copies: clang (before 16) refuses a lambda that captures structured bindings.
+    const int line = rows[axis_row + 1 + k].first;
+    const auto& row = rows[axis_row + 1 + k].second;
     const auto number = [&](int col, bool required) {
       double v = kNaN;
       const std::string s = cell(row, static_cast<size_t>(col));

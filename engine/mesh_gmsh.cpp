@@ -55,7 +55,9 @@ void read_v2(MeshTextReader& r, RawMesh& m) {
                 "node count");
       for (long k = 0; k < n; ++k) {
         const auto v = r.numbers<double>(r.require_line("a node"), 4, "a node (tag x y z)");
-        if (v[0] != std::floor(v[0])) r.fail("node tag is not an integer");
+        // Beyond 2⁵³ a double holds no exact integer (and the cast to long is undefined).
+        if (v[0] != std::floor(v[0]) || std::abs(v[0]) > 9007199254740992.0)
+          r.fail("node tag is not an integer");
         m.nodes[static_cast<long>(v[0])] = point(r, v[1], v[2], v[3]);
       }
       if (r.require_line("$EndNodes") != "$EndNodes") r.fail("expected $EndNodes");

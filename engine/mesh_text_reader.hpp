@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -57,10 +58,11 @@ class MeshTextReader {
       char* end = nullptr;
       errno = 0;
       const double v = std::strtod(tok.c_str(), &end);
-      if (*end != '\0' || errno == ERANGE)
+      if (*end != '\0' || errno == ERANGE || !std::isfinite(v))
         fail(fmt::format("'{}' is not a number (reading {})", tok, what));
       if constexpr (std::is_integral_v<T>) {
-        if (v != static_cast<double>(static_cast<long long>(v)) || std::abs(v) > 2e9)
+        // The range first: casting a double beyond long long is undefined behaviour.
+        if (std::abs(v) > 2e9 || v != std::trunc(v))
           fail(fmt::format("'{}' is not an integer (reading {})", tok, what));
       }
       out.push_back(static_cast<T>(v));

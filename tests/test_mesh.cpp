@@ -173,7 +173,13 @@ INSTANTIATE_TEST_SUITE_P(
                     MalformedCase{"bad_missing_node.msh", "bad_missing_node.msh:24", "node 80"},
                     MalformedCase{"bad_binary.msh", "bad_binary.msh:2", "ASCII"},
                     MalformedCase{"bad_number.msh", "bad_number.msh:33", "'0x' is not a number"},
-                    MalformedCase{"bad.ele", "bad.ele:5", "node 9"}));
+                    MalformedCase{"bad.ele", "bad.ele:5", "node 9"},
+                    // Found by scripts/fuzz.sh: a count or a tag beyond the integer
+                    // range had been cast to an integer (undefined behaviour).
+                    MalformedCase{"fuzz_count_2e48.node", "fuzz_count_2e48.node:2",
+                                  "is not an integer"},
+                    MalformedCase{"fuzz_node_tag_1e25.msh", "fuzz_node_tag_1e25.msh",
+                                  "node tag is not an integer"}));
 
 // Every prefix of a valid file, and random byte corruptions of it, must end in a
 // kelvin::Error or a mesh, never a crash, a hang or another exception type.
