@@ -55,10 +55,7 @@ void read_v2(MeshTextReader& r, RawMesh& m) {
                 "node count");
       for (long k = 0; k < n; ++k) {
         const auto v = r.numbers<double>(r.require_line("a node"), 4, "a node (tag x y z)");
-        // Beyond 2⁵³ a double holds no exact integer (and the cast to long is undefined).
-        if (v[0] != std::floor(v[0]) || std::abs(v[0]) > 9007199254740992.0)
-          r.fail("node tag is not an integer");
-        m.nodes[static_cast<long>(v[0])] = point(r, v[1], v[2], v[3]);
+        m.nodes[r.integer(v[0], "node tag")] = point(r, v[1], v[2], v[3]);
       }
       if (r.require_line("$EndNodes") != "$EndNodes") r.fail("expected $EndNodes");
     } else if (s == "$Elements") {
@@ -92,10 +89,11 @@ void read_v41(MeshTextReader& r, RawMesh& m) {
       for (long k = 0; k < c[3]; ++k) {
         const auto v =
             r.numbers<double>(r.require_line("a volume entity"), 8, "a volume entity", true);
-        const long nphys = static_cast<long>(v[7]);
+        const long nphys = r.integer(v[7], "physical tag count");
         if (static_cast<long>(v.size()) < 8 + nphys)
           r.fail("volume entity lists fewer physical tags than announced");
-        volume_group[static_cast<int>(v[0])] = nphys > 0 ? static_cast<int>(v[8]) : 0;
+        volume_group[static_cast<int>(r.integer(v[0], "entity tag"))] =
+            nphys > 0 ? static_cast<int>(r.integer(v[8], "physical tag")) : 0;
       }
       if (r.require_line("$EndEntities") != "$EndEntities") r.fail("expected $EndEntities");
     } else if (s == "$Nodes") {

@@ -28,8 +28,7 @@ Mesh read_tetgen(const std::string& path) {
   for (long k = 0; k < nn; ++k) {
     const auto v =
         nr.numbers<double>(nr.require_line("a node", true), 4, "a node (id x y z)", true);
-    const long id = static_cast<long>(v[0]);
-    if (v[0] != static_cast<double>(id)) nr.fail("node id is not an integer");
+    const long id = nr.integer(v[0], "node id");
     if (k == 0) {
       first = id;
       if (first != 0 && first != 1) nr.fail("node numbering must start at 0 or 1");

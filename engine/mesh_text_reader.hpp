@@ -47,6 +47,13 @@ class MeshTextReader {
   [[noreturn]] void fail(const std::string& why) const {
     throw Error(fmt::format("{}:{}: {}", path_, line_, why));
   }
+  /// A number read as a double that must be an id or a count: refused unless it is an
+  /// integer within ±2e9 (casting a double beyond the integer range is undefined).
+  long integer(double v, const char* what) const {
+    if (!(std::abs(v) <= 2e9) || v != std::trunc(v))
+      fail(fmt::format("{} {:g} is not an integer", what, v));
+    return static_cast<long>(v);
+  }
 
   /// Parses exactly `n` numbers (or at least n when `at_least`) from a line.
   template <class T>

@@ -179,7 +179,10 @@ INSTANTIATE_TEST_SUITE_P(
                     MalformedCase{"fuzz_count_2e48.node", "fuzz_count_2e48.node:2",
                                   "is not an integer"},
                     MalformedCase{"fuzz_node_tag_1e25.msh", "fuzz_node_tag_1e25.msh",
-                                  "node tag is not an integer"}));
+                                  "node tag 1e+25 is not an integer"},
+                    MalformedCase{"fuzz_entity_tag_3e107.msh", "fuzz_entity_tag_3e107.msh",
+                                  "is not an integer"},
+                    MalformedCase{"fuzz_node_id_9e28.node", "fuzz_node_id_9e28.node", "node id"}));
 
 // Every prefix of a valid file, and random byte corruptions of it, must end in a
 // kelvin::Error or a mesh, never a crash, a hang or another exception type.
