@@ -9,6 +9,7 @@
 /// from a tiny value is a nested extension. The dashpot scales with the spring so
 /// that a stiff pad stays overdamped (real eigenvalues, which every BDF order damps);
 /// an undamped stiff pad rings at kHz and the integrator must follow it.
+#include <Eigen/Core>
 #include <array>
 #include <vector>
 
@@ -30,6 +31,15 @@ std::vector<ClampFace> clamp_faces(const Mesh& mesh, const std::vector<int>& nod
 /// S_ab of a face (a, b ∈ 0…2): A/6 on the diagonal, A/12 off it.
 inline double face_weight(const ClampFace& f, int a, int b) {
   return f.area / 12 * (a == b ? 2 : 1);
+}
+
+/// Σ_b S_ab u(b) at node a of face f: the pads' weights applied to a field given per
+/// face node (positions, gaps, an adjoint).
+template <class Field>
+Eigen::Vector3d face_product(const ClampFace& f, int a, Field u) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (int b = 0; b < 3; ++b) sum += face_weight(f, a, b) * u(b);
+  return sum;
 }
 
 }  // namespace kelvin

@@ -149,10 +149,9 @@ void FemModel::add_clamp_springs(const Eigen::Matrix3Xd& x, const Eigen::Matrix3
     for (const auto& f : clamp_faces_) {
       const ClampBinding& c = clamps_[f.clamp];
       for (int a = 0; a < 3; ++a) {
-        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int b = 0; b < 3; ++b)
-          sum += face_weight(f, a, b) * (x.col(f.nodes[b]) + c.damping_time * v.col(f.nodes[b])) /
-                 c.compliance;
+        const Eigen::Vector3d sum = face_product(f, a, [&](int b) -> Eigen::Vector3d {
+          return (x.col(f.nodes[b]) + c.damping_time * v.col(f.nodes[b])) / c.compliance;
+        });
         for (int i = 0; i < 3; ++i) out.force[dof(f.nodes[a], i)] += sum[i];
       }
     }
@@ -181,8 +180,8 @@ double FemModel::clamp_spring_energy(double t, const Eigen::Matrix3Xd& x) const 
     for (int a = 0; a < 3; ++a)
       gap[a] = x.col(f.nodes[a]) - poses[f.clamp].position(mesh_.nodes.col(f.nodes[a]));
     for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b)
-        energy += 0.5 * face_weight(f, a, b) * gap[a].dot(gap[b]) / clamps_[f.clamp].compliance;
+      energy += 0.5 * gap[a].dot(face_product(f, a, [&](int b) { return gap[b]; })) /
+                clamps_[f.clamp].compliance;
   }
   return energy;
 }
@@ -193,13 +192,16 @@ void FemModel::clamp_pull(double t, bool with_velocity, Eigen::VectorXd& out) co
   const PosesAt poses(clamps_, t);
   for (const auto& f : clamp_faces_) {
     const ClampBinding& c = clamps_[f.clamp];
+    Eigen::Vector3d target[3];
     for (int b = 0; b < 3; ++b) {
       const Eigen::Vector3d X = mesh_.nodes.col(f.nodes[b]);
-      Eigen::Vector3d target = poses[f.clamp].position(X);
-      if (with_velocity) target += c.damping_time * poses[f.clamp].velocity(X);
-      target /= c.compliance;
-      for (int a = 0; a < 3; ++a)
-        for (int i = 0; i < 3; ++i) out[dof(f.nodes[a], i)] += face_weight(f, a, b) * target[i];
+      target[b] = poses[f.clamp].position(X);
+      if (with_velocity) target[b] += c.damping_time * poses[f.clamp].velocity(X);
+      target[b] /= c.compliance;
+    }
+    for (int a = 0; a < 3; ++a) {
+      const Eigen::Vector3d sum = face_product(f, a, [&](int b) { return target[b]; });
+      for (int i = 0; i < 3; ++i) out[dof(f.nodes[a], i)] += sum[i];
     }
   }
 }
@@ -652,13 +654,16 @@ void FemModel::transpose_multiply(const ElementTangents& t, const double* lambda
   // The springs' S/c and dashpots' τ S/c are symmetric: Sᵀλ = Sλ.
   for (const auto& f : clamp_faces_) {
     const ClampBinding& c = clamps_[f.clamp];
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b)
-        for (int i = 0; i < 3; ++i) {
-          const double l = lambda[dof(f.nodes[b], i)], w = face_weight(f, a, b);
-          Kt[dof(f.nodes[a], i)] += w / c.compliance * l;
-          Dt[dof(f.nodes[a], i)] += w * c.damping_time / c.compliance * l;
-        }
+    for (int a = 0; a < 3; ++a) {
+      const Eigen::Vector3d sum = face_product(f, a, [&](int b) {
+        return Eigen::Vector3d(lambda[dof(f.nodes[b], 0)], lambda[dof(f.nodes[b], 1)],
+                               lambda[dof(f.nodes[b], 2)]);
+      });
+      for (int i = 0; i < 3; ++i) {
+        Kt[dof(f.nodes[a], i)] += sum[i] / c.compliance;
+        Dt[dof(f.nodes[a], i)] += sum[i] * c.damping_time / c.compliance;
+      }
+    }
   }
 }
 

@@ -162,8 +162,7 @@ void ParamDerivatives::clamp_compliance_derivative(double t, const Eigen::Matrix
     }
     Vec12 dR = Vec12::Zero();
     for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b)
-        dR.segment<3>(3 * f.local[a]) -= face_weight(f, a, b) * gap[b] / c2;
+      dR.segment<3>(3 * f.local[a]) = -face_product(f, a, [&](int b) { return gap[b]; }) / c2;
     visit(f.element, s, dR);
   }
 }
