@@ -114,13 +114,10 @@ int quadrature_b(realtype t, N_Vector y, N_Vector yp, N_Vector l, N_Vector, N_Ve
     const Eigen::Map<const Eigen::VectorXd> lambda(N_VGetArrayPointer(l), 2 * b->n);
     b->peak.x = std::max(b->peak.x, lambda.head(b->n).lpNorm<Eigen::Infinity>());
     b->peak.v = std::max(b->peak.v, lambda.tail(b->n).lpNorm<Eigen::Infinity>());
-    const int ne = run.model.mesh().num_tets();
-    const int ns = static_cast<int>(run.deriv.slots().size());
-    Eigen::Map<Eigen::MatrixXd> out(N_VGetArrayPointer(q), ns, ne);
-    out.setZero();
+    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(q), N_VGetLength(q)).setZero();
     const ElementTangents* cached =
         b->cached_at(t, N_VGetArrayPointer(y)) ? &b->dae.tangents() : nullptr;
-    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, out, cached)) return 1;
+    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, N_VGetArrayPointer(q), cached)) return 1;
   } catch (const std::exception& e) {
     b->fatal = e.what();
     return -1;
@@ -210,16 +207,16 @@ void add_backward_stats(void* mem_b, IntegratorStats& stats) {
   if (IDAGetNumNonlinSolvConvFails(mem_b, &v) == 0) stats.convergence_failures += v;
 }
 
-/// Solves one segment backward from (T1, λ) to T0; adds −∫λvᵀ∂R/∂q dt to dphi_dq and
+/// Solves one segment backward from (T1, λ) to T0; adds −∫λvᵀ∂R/∂p dt to dphi_dp and
 /// raises `seen` to the peaks of |λx|, |λv| it met.
 bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, double T1,
-                      Eigen::VectorXd& lambda, Eigen::MatrixXd& dphi_dq,
+                      Eigen::VectorXd& lambda, Eigen::VectorXd& dphi_dp,
                       Experiment::AdjointPeaks& seen, ExperimentResult& result) {
   const int n = run.n;
   void* mem = forward.idas_memory();
   auto ctx = static_cast<SUNContext>(forward.sundials_context());
   Backward b(run);
-  const long nq = static_cast<long>(dphi_dq.size());
+  const long nq = static_cast<long>(dphi_dp.size());
   N_Vector l = new_state_vector(2 * n, ctx), lp = new_state_vector(2 * n, ctx),
            q = N_VNew_Serial(nq, ctx), atol = new_state_vector(2 * n, ctx);
   SUNMatrix J = SUNSparseMatrix(2 * n, 2 * n, 1, CSC_MAT, ctx);
@@ -298,8 +295,7 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
   check(IDAGetB(mem, which, &t, l, lp), "IDAGetB");
   check(IDAGetQuadB(mem, which, &t, q), "IDAGetQuadB");
   lambda = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(l), 2 * n);
-  dphi_dq +=
-      Eigen::Map<const Eigen::MatrixXd>(N_VGetArrayPointer(q), dphi_dq.rows(), dphi_dq.cols());
+  dphi_dp += Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(q), nq);
   return true;
 }
 
@@ -378,9 +374,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       }))
     return;
 
-  const int ns = static_cast<int>(run.deriv.slots().size());
-  const int ne = run.model.mesh().num_tets();
-  result.dphi_dq.setZero(ns, ne);
+  Eigen::VectorXd dphi_dp = Eigen::VectorXd::Zero(run.map.size());
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
   Experiment::AdjointPeaks seen;
   Eigen::VectorXd x, v;
@@ -427,8 +421,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       run.add_quadratures(*integ, result);
       run.set_adjoint_scale(result.phi_per_marker);
     }
-    if (!backward_segment(run, *integ, T[k], T[k + 1], lambda, result.dphi_dq, seen, result))
-      return;
+    if (!backward_segment(run, *integ, T[k], T[k + 1], lambda, dphi_dp, seen, result)) return;
   }
   // The peaks are kept while they predict λ within kLooseTolerance, so that
   // evaluating one point twice gives one gradient.
@@ -441,10 +434,10 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
     // + λx(t₀)ᵀ x₀_q = −μᵀ ∂R/∂q at the static state, K₀ᵀ μ = λx(t₀).
     run.factor_static_stiffness();
     const Eigen::VectorXd mu = run.K0->transpose().solve(lambda.head(n));
-    if (!run.contract(mu.data(), -1.0, result.dphi_dq))
+    if (!run.contract(mu.data(), -1.0, dphi_dp.data()))
       throw Error("an element is inadmissible at the static state");
   }
-  result.gradient = run.map.pull_back(run.p, result.dphi_dq);
+  result.gradient = dphi_dp;
   if (run.observation_count > 0)
     run.map.add_observation_gradient(result.dphi_dtheta, result.gradient);
   result.ok = true;

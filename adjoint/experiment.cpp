@@ -102,6 +102,14 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
   iopt.atol *= o.tolerance_scale;
   if (o.method != GradientMethod::kNone && !m.observation_blocks().empty())
     observation_count = objective.num_observation_parameters();
+  const int ne = model.mesh().num_tets(), ns = static_cast<int>(deriv.slots().size());
+  dependency_ptr.assign(static_cast<std::size_t>(ns) * ne + 1, 0);
+  for (int s = 0; s < ns; ++s)
+    for (int e = 0; e < ne; ++e) {
+      map.for_each_dependency(p, s, e, [&](int j, double dq) { dependencies.emplace_back(j, dq); });
+      dependency_ptr[static_cast<std::size_t>(s) * ne + e + 1] =
+          static_cast<int>(dependencies.size());
+    }
   initial_state(ex.scenario(), model, x0, v0);
   if (iopt.max_order <= 0) iopt.max_order = ex.order_cap(iopt, t_end, x0, v0, o.tolerance_scale);
 }
@@ -251,17 +259,21 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
 bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
   B.setZero(n, map.size());
   const auto& elements = model.elements();
+  const std::size_t ne = elements.size();
   return deriv.for_each(t_state, x, v, a, [&](int e, int s, const Vec12& dR) {
-    map.for_each_dependency(p, s, e, [&](int j, double dq) {
-      for (int k = 0; k < 12; ++k)
-        if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0) B(d, j) += dq * dR[k];
-    });
+    const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
+    for (std::size_t k = k0; k < k1; ++k) {
+      const auto [j, dq] = dependencies[k];
+      for (int i = 0; i < 12; ++i)
+        if (const int d = model.dof(elements[e].nodes[i / 3], i % 3); d >= 0) B(d, j) += dq * dR[i];
+    }
   });
 }
 
-bool ExperimentRun::contract(const double* lambda, double scale, Eigen::Ref<Eigen::MatrixXd> out,
+bool ExperimentRun::contract(const double* lambda, double scale, double* out,
                              const ElementTangents* cached) {
   const auto& elements = model.elements();
+  const std::size_t ne = elements.size();
   return deriv.for_each(
       t_state, x, v, a,
       [&](int e, int s, const Vec12& dR) {
@@ -269,7 +281,9 @@ bool ExperimentRun::contract(const double* lambda, double scale, Eigen::Ref<Eige
         for (int k = 0; k < 12; ++k)
           if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0)
             sum += lambda[d] * dR[k];
-        out(s, e) += scale * sum;
+        const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
+        for (std::size_t k = k0; k < k1; ++k)
+          out[dependencies[k].first] += scale * sum * dependencies[k].second;
       },
       cached);
 }

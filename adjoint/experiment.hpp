@@ -64,7 +64,6 @@ struct ExperimentResult {
   double phi = 0, rms = 0;         // Σ Φᵢ and the RMS distance (m)
   Eigen::VectorXd gradient;        // dΦ/dp (empty without a gradient)
   Eigen::VectorXd dphi_dtheta;     // ∫ ∂g/∂θ dt over the observation vector, with a gradient
-  Eigen::MatrixXd dphi_dq;         // adjoint only: dΦ/dq per slot × element
   IntegratorStats forward_stats, backward_stats;
   long backward_steps = 0;
   int segments = 1;

@@ -75,10 +75,16 @@ struct ExperimentRun {
                std::optional<double> t_stop = std::nullopt);
   /// ∂R/∂p_j over the free dofs for every entry j of p, at the current x, v, a.
   bool param_vectors(Eigen::MatrixXd& B);
-  /// out(s, e) += scale · λ_eᵀ ∂R_e/∂q_{s,e} at the current x, v, a (with dP/dq
-  /// from `cached` when given, see ParamDerivatives::for_each).
-  bool contract(const double* lambda, double scale, Eigen::Ref<Eigen::MatrixXd> out,
+  /// out[j] += scale · Σ_{s,e} λ_eᵀ ∂R_e/∂q_{s,e} ∂q_{s,e}/∂p_j at the current x, v, a
+  /// for every entry j of p (with dP/dq from `cached` when given, see
+  /// ParamDerivatives::for_each): the adjoint integrates p.size() quadratures, not
+  /// one per slot and element (a body force has thousands of slot-element pairs).
+  bool contract(const double* lambda, double scale, double* out,
                 const ElementTangents* cached = nullptr);
+  /// ∂q_{s,e}/∂p at p, which stays put during an evaluation: (j, ∂q/∂p_j) pairs of
+  /// slot s in element e in dependencies[dependency_ptr[s·ne + e] … [s·ne + e + 1]).
+  std::vector<int> dependency_ptr;
+  std::vector<std::pair<int, double>> dependencies;
 
   /// Typical magnitudes of λx and λv, for the backward absolute tolerances, and the
   /// RMS misfit they belong to. From the experiment's last adjoint pass scaled by

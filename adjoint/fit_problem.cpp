@@ -47,6 +47,11 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
   // Joint experiments share the fitted parameters, so each must have the same
   // material models; otherwise a slot would name another model's parameter (found
   // here, not as a failed simulation at the first evaluation).
+  if (experiments_.size() > 1 && map_->has_body_force())
+    throw Error(fmt::format(
+        "{}: fit.experiments: a body force (body_force.x|y|z) explains one motion; fit it on "
+        "one experiment, not jointly with {}",
+        scenario.path, experiments_[1]->scenario().path));
   const auto& terms = experiments_[0]->model().terms();
   for (size_t e = 1; e < experiments_.size(); ++e) {
     const auto& other = experiments_[e]->model().terms();

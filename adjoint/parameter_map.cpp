@@ -13,6 +13,7 @@ namespace kelvin {
 namespace {
 
 ParamSlot resolve_target(const std::string& target, const Scenario& s, int line) {
+  if (const int axis = body_force_axis(target); axis >= 0) return {-1, 0, -1, axis};
   if (const std::string name = clamp_of_compliance_target(target); !name.empty())
     for (int c = 0; c < static_cast<int>(s.clamps.size()); ++c)
       if (s.clamps[c].name == name && s.clamps[c].compliance > 0) return {-1, 0, c};
@@ -25,6 +26,10 @@ ParamSlot resolve_target(const std::string& target, const Scenario& s, int line)
 /// The model's value of a slot in element e.
 double slot_value(const FemModel& model, const ParamSlot& slot, int e) {
   if (slot.is_clamp()) return model.clamps()[slot.clamp].compliance;
+  if (slot.is_force())
+    return slot.index < model.body_force().knots()
+               ? model.body_force().value(slot.force, slot.index, e)
+               : 0.0;
   return slot.is_density() ? model.density()[e] : model.terms()[slot.term].q(slot.index, e);
 }
 
@@ -72,6 +77,7 @@ double typical_scale(const FitParameterSpec& spec, const Scenario& s,
   if (spec.scale > 0) return spec.scale;
   if (start.size() && start.cwiseAbs().maxCoeff() > 0) return start.cwiseAbs().maxCoeff();
   if (spec.target.rfind("markers.", 0) == 0) return 1e-3;
+  if (body_force_axis(spec.target) >= 0) return s.gravity.norm() > 0 ? s.gravity.norm() : 1.0;
   const auto quantities = material_quantities(s.material);
   const MaterialQuantity* self = find_quantity(quantities, spec.target);
   double smallest = HUGE_VAL;
@@ -197,50 +203,77 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
         break;
       }
     }
-    b.count = static_cast<int>(suffix.size());
-    for (int j = 0; j < b.count; ++j) b.labels.push_back(spec.target + suffix[j]);
-    // A multiplier of regions (elastic.moduli): the indicator basis, in log space.
-    const bool multiplier = spec.scope == Scope::Legendre || spec.target == kElasticModuli;
-    if (multiplier && !b.is_multiplier()) {
-      b.basis = Eigen::MatrixXd::Zero(ne, b.count);
-      for (int e = 0; e < ne; ++e)
-        if (b.entry[e] >= 0) b.basis(e, b.entry[e]) = 1;
-    }
-    b.initial.resize(b.count);
-    if (multiplier) {
-      b.initial.setConstant(spec.initial.value_or(spec.scope == Scope::Legendre ? 0.0 : 1.0));
-    } else {
-      // Start from the given value, else from the model's current value in the entry's elements.
-      b.slot = resolve_target(spec.target, s, spec.line);
-      for (int e = ne - 1; e >= 0; --e)
-        if (b.entry[e] >= 0) b.initial[b.entry[e]] = slot_value(model, b.slot, e);
-      if (spec.initial) b.initial.setConstant(*spec.initial);
-      if (!b.log) b.scale = typical_scale(spec, s, b.initial);
-    }
-    for (int j = 0; j < b.count; ++j) {
-      if (b.log && !(b.initial[j] > 0))
+    // A body force has one block of the scope's entries per knot in time.
+    const bool force = body_force_axis(spec.target) >= 0;
+    const int copies = force ? spec.knots : 1;
+    if (force && copies < 1)
+      throw Error(fmt::format("{}:{}: fit.parameters: {} needs knots (≥ 1)", s.path, spec.line,
+                              spec.target));
+    for (const auto& other : specs)
+      if (force && body_force_axis(other.target) >= 0 && other.knots != copies)
         throw Error(
-            fmt::format("{}:{}: fit.parameters: {} starts at {:g}, but a log-transformed "
-                        "parameter must be positive",
-                        s.path, spec.line, b.labels[j], b.initial[j]));
-      if (b.initial[j] < b.lower || b.initial[j] > b.upper)
-        throw Error(fmt::format("{}:{}: fit.parameters: {} starts at {:g}, outside [{:g}, {:g}]",
-                                s.path, spec.line, b.labels[j], b.initial[j], b.lower, b.upper));
-    }
-    for (int j = 0; j < b.count; ++j) block_of_.push_back(static_cast<int>(blocks_.size()));
-    size_ += b.count;
-    // One block per slot; those after the first share its entries of p.
-    const auto slots = spec_slots(spec, s);
-    for (size_t k = 0; k < slots.size(); ++k) {
-      ParameterBlock sb = b;
-      sb.slot = slots[k].first;
-      sb.target = slots[k].second;
-      sb.shares_entries = k > 0;
-      if (sb.is_multiplier()) {
-        sb.nominal.resize(ne);
-        for (int e = 0; e < ne; ++e) sb.nominal[e] = slot_value(model, sb.slot, e);
+            fmt::format("{}:{}: fit.parameters: every body-force target needs the same "
+                        "knots ({} has {}, {} has {})",
+                        s.path, spec.line, spec.target, copies, other.target, other.knots));
+    b.penalty = spec.penalty;
+    b.knots = force ? copies : 0;
+    b.force_end = force ? s.time.end : 0;
+    auto knot_suffix = [&](int k) {
+      return force ? fmt::format("[t {:.4g} s]", s.time.end * (k + 1) / (copies + 1))
+                   : std::string();
+    };
+    const ParameterBlock scoped = b;
+    for (int knot = 0; knot < copies; ++knot) {
+      b = scoped;
+      b.offset = size_;
+      b.count = static_cast<int>(suffix.size());
+      for (int j = 0; j < b.count; ++j)
+        b.labels.push_back(spec.target + suffix[j] + knot_suffix(knot));
+      // A multiplier of regions (elastic.moduli): the indicator basis, in log space.
+      const bool multiplier = spec.scope == Scope::Legendre || spec.target == kElasticModuli;
+      if (multiplier && !b.is_multiplier()) {
+        b.basis = Eigen::MatrixXd::Zero(ne, b.count);
+        for (int e = 0; e < ne; ++e)
+          if (b.entry[e] >= 0) b.basis(e, b.entry[e]) = 1;
       }
-      blocks_.push_back(std::move(sb));
+      b.initial.resize(b.count);
+      if (multiplier) {
+        b.initial.setConstant(spec.initial.value_or(spec.scope == Scope::Legendre ? 0.0 : 1.0));
+      } else {
+        // Start from the given value, else from the model's current value in the entry's elements.
+        b.slot = resolve_target(spec.target, s, spec.line);
+        if (b.slot.is_force()) b.slot.index = knot;
+        for (int e = ne - 1; e >= 0; --e)
+          if (b.entry[e] >= 0) b.initial[b.entry[e]] = slot_value(model, b.slot, e);
+        if (spec.initial) b.initial.setConstant(*spec.initial);
+        if (!b.log) b.scale = typical_scale(spec, s, b.initial);
+      }
+      for (int j = 0; j < b.count; ++j) {
+        if (b.log && !(b.initial[j] > 0))
+          throw Error(
+              fmt::format("{}:{}: fit.parameters: {} starts at {:g}, but a log-transformed "
+                          "parameter must be positive",
+                          s.path, spec.line, b.labels[j], b.initial[j]));
+        if (b.initial[j] < b.lower || b.initial[j] > b.upper)
+          throw Error(fmt::format("{}:{}: fit.parameters: {} starts at {:g}, outside [{:g}, {:g}]",
+                                  s.path, spec.line, b.labels[j], b.initial[j], b.lower, b.upper));
+      }
+      for (int j = 0; j < b.count; ++j) block_of_.push_back(static_cast<int>(blocks_.size()));
+      size_ += b.count;
+      // One block per slot; those after the first share its entries of p.
+      const auto slots = spec_slots(spec, s);
+      for (size_t k = 0; k < slots.size(); ++k) {
+        ParameterBlock sb = b;
+        sb.slot = slots[k].first;
+        if (sb.slot.is_force()) sb.slot.index = knot;
+        sb.target = slots[k].second;
+        sb.shares_entries = k > 0;
+        if (sb.is_multiplier()) {
+          sb.nominal.resize(ne);
+          for (int e = 0; e < ne; ++e) sb.nominal[e] = slot_value(model, sb.slot, e);
+        }
+        blocks_.push_back(std::move(sb));
+      }
     }
   }
   // Which blocks act on the same slot: the last value block sets it, multipliers scale it.
@@ -248,7 +281,8 @@ ParameterMap::ParameterMap(const std::vector<FitParameterSpec>& specs, const Sce
   value_block_.assign(nb, -1);
   multipliers_.assign(nb, {});
   auto same = [](const ParamSlot& a, const ParamSlot& b) {
-    return a.term == b.term && a.clamp == b.clamp && (!a.is_material() || a.index == b.index);
+    return a.term == b.term && a.clamp == b.clamp && a.force == b.force &&
+           ((!a.is_material() && !a.is_force()) || a.index == b.index);
   };
   for (int k = 0; k < nb; ++k)
     for (int o = 0; o < nb; ++o) {
@@ -373,12 +407,17 @@ void ParameterMap::apply(const Eigen::VectorXd& p, FemModel& model) const {
   if (p.size() != size_) throw Error("parameter vector has the wrong size");
   Eigen::VectorXd density = model.density();
   bool density_changed = false;
+  for (const auto& b : blocks_)
+    if (b.slot.is_force())
+      model.body_force().configure(0, b.force_end, b.knots, model.mesh().num_tets());
   for (int s = 0; s < static_cast<int>(blocks_.size()); ++s) {
     const auto& b = blocks_[s];
     for (int e = 0; e < static_cast<int>(b.entry.size()); ++e) {
       if (b.entry[e] < 0) continue;
       const double q = element_value(p, s, e);
-      if (b.slot.is_clamp()) {
+      if (b.slot.is_force()) {
+        model.body_force().value(b.slot.force, b.slot.index, e) = q;
+      } else if (b.slot.is_clamp()) {
         model.set_clamp_compliance(b.slot.clamp, q);  // one value: every entry holds it
       } else if (b.slot.is_density()) {
         density[e] = q;
@@ -397,13 +436,20 @@ int ParameterMap::index(int s, int e) const {
   return b.entry[e] < 0 || b.is_multiplier() ? -1 : b.offset + b.entry[e];
 }
 
-Eigen::VectorXd ParameterMap::pull_back(const Eigen::VectorXd& p,
-                                        const Eigen::MatrixXd& dphi_dq) const {
-  Eigen::VectorXd g = Eigen::VectorXd::Zero(size_);
-  for (int s = 0; s < static_cast<int>(blocks_.size()); ++s)
-    for (int e = 0; e < static_cast<int>(dphi_dq.cols()); ++e)
-      for_each_dependency(p, s, e, [&](int j, double dq) { g[j] += dphi_dq(s, e) * dq; });
-  return g;
+double ParameterMap::prior_penalty(const Eigen::VectorXd& p, Eigen::VectorXd* g) const {
+  double sum = 0;
+  for (const auto& b : blocks_) {
+    if (b.penalty <= 0 || b.shares_entries) continue;
+    const Eigen::VectorXd z = p.segment(b.offset, b.count) / b.scale;
+    sum += b.penalty * z.squaredNorm();
+    if (g) g->segment(b.offset, b.count) += 2 * b.penalty * z / b.scale;
+  }
+  return sum;
+}
+
+bool ParameterMap::has_body_force() const {
+  return std::any_of(blocks_.begin(), blocks_.end(),
+                     [](const ParameterBlock& b) { return b.slot.is_force(); });
 }
 
 std::vector<std::pair<int, int>> ParameterMap::neighbour_pairs(const Mesh& mesh) const {

@@ -10,7 +10,7 @@
 /// every multiplier acting on it, so a modulus can be fitted and scaled at once.
 /// Several blocks can share entries of p (elastic.moduli: one multiplier for every
 /// modulus).
-/// Gradients are computed per element and slot (dΦ/dq_e) and pulled back here.
+/// Gradients reach p through for_each_dependency (∂q per slot and element over ∂p).
 #include <Eigen/Core>
 #include <string>
 #include <utility>
@@ -40,6 +40,11 @@ struct ParameterBlock {
   Eigen::VectorXd nominal;
   /// True for a block that reuses an earlier block's entries (offset, count).
   bool shares_entries = false;
+  /// A Gaussian prior at 0 (FitParameterSpec::penalty): Φ gains penalty Σ (p/scale)².
+  double penalty = 0;
+  /// Body-force blocks (slot.is_force()): the field's knots over [0, force_end].
+  int knots = 0;
+  double force_end = 0;
   bool is_multiplier() const { return basis.size() > 0; }
 };
 
@@ -104,12 +109,14 @@ class ParameterMap {
   void for_each_dependency(const Eigen::VectorXd& p, int s, int e, Visit visit) const;
   /// Index in p of slot s in element e for a value block, or −1.
   int index(int s, int e) const;
-  /// dΦ/dp from dΦ/dq per slot and element (slots × elements).
-  Eigen::VectorXd pull_back(const Eigen::VectorXd& p, const Eigen::MatrixXd& dphi_dq) const;
 
   /// Pairs of entries of per-element blocks whose elements share a face: the
   /// neighbours of the smoothness regulariser.
   std::vector<std::pair<int, int>> neighbour_pairs(const Mesh& mesh) const;
+  /// The priors' penalty Σ_blocks penalty Σⱼ (pⱼ/scale)², and its gradient added to g.
+  double prior_penalty(const Eigen::VectorXd& p, Eigen::VectorXd* g = nullptr) const;
+  /// True when some block carries a body-force field.
+  bool has_body_force() const;
 
   const std::vector<ObservationBlock>& observation_blocks() const { return observation_blocks_; }
   /// θ from p: the observation entries set, the others zero (the nominal).

@@ -88,6 +88,12 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   ParameterUncertainty u;
   const ParameterMap& map = problem.map();
   const int n = map.size();
+  if (map.has_body_force()) {
+    // Its priors shape the fit (not the Gauss–Newton covariance), and it has one
+    // sensitivity per knot and entry.
+    u.error = "parameter uncertainties are not computed for a fit with a body-force field";
+    return u;
+  }
   if (n > kMaxParameters) {
     u.error = fmt::format(
         "parameter uncertainties are not computed for {} parameters (limit {}): they need one "

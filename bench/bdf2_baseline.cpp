@@ -95,8 +95,7 @@ Bdf2Result bdf2_run(ExperimentRun& run, double h, const std::vector<double>& tim
   // λ_k solves J_kᵀ λ_k = c_k ∂g/∂y_k − Σ_{j=1,2} (α_{k+j, j}/h) E λ_{k+j}, E = diag(I, M)
   // (= ∂F/∂ẏ), J_k = ∂F/∂y + (α_{k,0}/h) E; dΦ/dq = −Σ_k λ_{k,v}ᵀ ∂R/∂q at y_k, plus the
   // initial state's share through x₀(q) for a static start.
-  const int ns = static_cast<int>(run.deriv.slots().size());
-  Eigen::MatrixXd dphi_dq = Eigen::MatrixXd::Zero(ns, model.mesh().num_tets());
+  Eigen::VectorXd dphi_dp = Eigen::VectorXd::Zero(run.map.size());
   std::vector<Eigen::VectorXd> lambda(steps + 3, Eigen::VectorXd::Zero(N2));
   Eigen::VectorXd rhs(N2), Elam(N2);
   auto right_side = [&](long k) {
@@ -131,7 +130,7 @@ Bdf2Result bdf2_run(ExperimentRun& run, double h, const std::vector<double>& tim
     if (k >= 2) yp += c.a2 * y[k - 2];
     yp /= h;
     run.expand(t, y[k].data(), yp.data());
-    if (!run.contract(lambda[k].data() + n, -1.0, dphi_dq)) {
+    if (!run.contract(lambda[k].data() + n, -1.0, dphi_dp.data())) {
       out.error = fmt::format("an element is inadmissible at t = {:.6g} s", t);
       return out;
     }
@@ -140,13 +139,13 @@ Bdf2Result bdf2_run(ExperimentRun& run, double h, const std::vector<double>& tim
     right_side(0);
     run.factor_static_stiffness();
     const Eigen::VectorXd mu = run.K0->transpose().solve(Eigen::VectorXd(rhs.head(n)));
-    if (!run.contract(mu.data(), -1.0, dphi_dq)) {
+    if (!run.contract(mu.data(), -1.0, dphi_dp.data())) {
       out.error = "an element is inadmissible at the static state";
       return out;
     }
   }
   out.stored_mib *= 2;  // and λ
-  out.gradient = run.map.pull_back(run.p, dphi_dq);
+  out.gradient = dphi_dp;
   out.ok = true;
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;

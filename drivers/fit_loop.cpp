@@ -173,7 +173,7 @@ double projected_norm(const Eigen::VectorXd& g, const Eigen::Ref<const Eigen::Ve
 
 /// The history record of evaluation `ev` at p (not yet numbered as accepted or
 /// given its iteration), and in g the objective's gradient there (misfit's plus the
-/// smoothness penalty's; zero after a failure). Counts a failure.
+/// smoothness penalty's and the priors'; zero after a failure). Counts a failure.
 FitRecord record_of(Context& c, const Eigen::VectorXd& p, const Evaluation& ev,
                     double tolerance_scale, Eigen::VectorXd& g) {
   FitRecord r;
@@ -189,6 +189,7 @@ FitRecord record_of(Context& c, const Eigen::VectorXd& p, const Evaluation& ev,
     r.rms = ev.rms;
     r.penalty = c.options.smoothness * smoothness_roughness(c.pairs, p, &g);
     g *= c.options.smoothness;
+    r.penalty += c.problem.map().prior_penalty(p, &g);
     if (ev.gradient.size()) g += ev.gradient;
     r.objective = r.misfit + r.penalty;
     r.gradient_norm = ev.gradient.size() ? g.norm() : 0;

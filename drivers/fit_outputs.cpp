@@ -9,6 +9,7 @@
 
 #include "adjoint/marker_trajectory.hpp"
 #include "adjoint/uncertainty.hpp"
+#include "drivers/body_force_outputs.hpp"
 #include "drivers/fit_report.hpp"
 #include "drivers/fitted_scenario.hpp"
 #include "engine/output.hpp"
@@ -100,12 +101,13 @@ void write_marker_rms_csv(const std::string& path, const std::vector<MarkerRms>&
 std::string write_parameter_fields(FitProblem& problem, const FitSummary& s) {
   const ParameterMap& map = problem.map();
   bool varies = false;
-  for (const auto& b : map.blocks()) varies |= b.count > 1;
+  for (const auto& b : map.blocks()) varies |= b.count > 1 && !b.slot.is_force();
   if (!varies) return "";
   const Mesh& mesh = problem.experiment(0).scenario().mesh;
   std::vector<std::pair<std::string, Eigen::VectorXd>> fields;
   for (int k = 0; k < static_cast<int>(map.blocks().size()); ++k) {
     const ParameterBlock& b = map.blocks()[k];
+    if (b.slot.is_force()) continue;  // write_body_force's series
     Eigen::VectorXd fitted(mesh.num_tets()), start(mesh.num_tets());
     for (int e = 0; e < mesh.num_tets(); ++e) {
       const bool mapped = b.entry[e] >= 0;
@@ -161,6 +163,7 @@ std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
   data.files.push_back("fit-state.yaml");
   if (const std::string vtu = write_parameter_fields(problem, s); !vtu.empty())
     data.files.push_back(vtu);
+  for (const std::string& f : write_body_force(model, s.outdir)) data.files.push_back(f);
 
   const bool stopped = s.interrupted || (interrupt && interrupt->load());
   if (!stopped) {

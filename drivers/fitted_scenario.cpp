@@ -87,6 +87,9 @@ std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& 
   for (const auto& f : scenario.material.fields) columns.push_back({f.target, f.term, f.index});
   std::map<std::string, double> scalar;  // target → value now in the `material` node
   for (const auto& b : map.blocks()) {
+    // A fitted body force explains a motion, it is not a property of the specimen:
+    // it goes to body-force.csv and its VTU series (body_force_outputs.hpp).
+    if (b.slot.is_force()) continue;
     if (b.slot.is_clamp()) {
       // clamps[k] is the scenario's k-th entry; its compliance replaces either key.
       YAML::Node clamp = yaml_child(root, "clamps")[b.slot.clamp];

@@ -11,10 +11,12 @@ bool DaeSystem::residual(double t, const double* y, const double* yp, double* r)
   if (!model_.assemble(x_, v_, {}, out_)) return false;
   model_.clamp_inertia(t, clamp_inertia_);
   model_.clamp_pull(t, true, clamp_pull_);
+  model_.body_force_load(t, body_load_);
   for (int i = 0; i < n_; ++i) r[i] = yp[i] - y[n_ + i];
   double* rv = r + n_;
   for (int i = 0; i < n_; ++i)
-    rv[i] = out_.force[i] + clamp_inertia_[i] - clamp_pull_[i] - model_.external_force()[i];
+    rv[i] = out_.force[i] + clamp_inertia_[i] - clamp_pull_[i] - body_load_[i] -
+            model_.external_force()[i];
   model_.mass_multiply(yp + n_, rv);
   return true;
 }
@@ -58,7 +60,9 @@ bool DaeSystem::consistent_derivative(double t, const double* y, double* yp) {
   if (!model_.assemble(x_, v_, {}, out_)) return false;
   model_.clamp_inertia(t, clamp_inertia_);
   model_.clamp_pull(t, true, clamp_pull_);
-  const Eigen::VectorXd rhs = model_.external_force() + clamp_pull_ - out_.force - clamp_inertia_;
+  model_.body_force_load(t, body_load_);
+  const Eigen::VectorXd rhs =
+      model_.external_force() + clamp_pull_ + body_load_ - out_.force - clamp_inertia_;
   for (int i = 0; i < n_; ++i) yp[i] = y[n_ + i];
   mass_solve(rhs.data(), yp + n_);
   return true;

@@ -53,7 +53,7 @@ class DaeSystem {
   const FemModel& model_;
   int n_;
   Eigen::Matrix3Xd x_, v_;
-  Eigen::VectorXd clamp_inertia_, clamp_pull_;
+  Eigen::VectorXd clamp_inertia_, clamp_pull_, body_load_;
   AssemblyOutput out_;
   ElementTangents tangents_;
   std::vector<double> mass_diagonal_;  // lumped mass per free dof

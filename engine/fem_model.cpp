@@ -186,6 +186,17 @@ double FemModel::clamp_spring_energy(double t, const Eigen::Matrix3Xd& x) const 
   return energy;
 }
 
+void FemModel::body_force_load(double t, Eigen::VectorXd& out) const {
+  out.setZero(n_);
+  if (!body_force_.active()) return;
+  for (int e = 0; e < mesh_.num_tets(); ++e) {
+    const Eigen::Vector3d f = density_[e] * elements_[e].volume / 4 * body_force_.at(e, t);
+    for (int a = 0; a < 4; ++a)
+      for (int i = 0; i < 3; ++i)
+        if (const int d = dof(elements_[e].nodes[a], i); d >= 0) out[d] += f[i];
+  }
+}
+
 void FemModel::clamp_pull(double t, bool with_velocity, Eigen::VectorXd& out) const {
   out.setZero(n_);
   if (clamp_faces_.empty()) return;

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/body_force.hpp"
 #include "engine/clamp_spring.hpp"
 #include "engine/element.hpp"
 #include "engine/mesh.hpp"
@@ -178,6 +179,12 @@ class FemModel {
   const std::vector<ClampFace>& clamp_faces() const { return clamp_faces_; }
   /// Sets a compliant clamp's compliance (> 0).
   void set_clamp_compliance(int clamp, double compliance);
+  /// A fitted body-force field (per unit mass; inactive unless configured).
+  const BodyForceField& body_force() const { return body_force_; }
+  BodyForceField& body_force() { return body_force_; }
+  /// The body-force field's load on the free dofs at t: element e's ρ_e V_e/4 a(e, t)
+  /// on each of its nodes (M_e times a uniform acceleration, lumped or consistent).
+  void body_force_load(double t, Eigen::VectorXd& out) const;
   /// y += M x over the free dofs.
   void mass_multiply(const double* x, double* y) const;
 
@@ -261,6 +268,7 @@ class FemModel {
   std::vector<ClampFace> clamp_faces_;       // of the compliant clamps
   std::vector<int> clamp_face_entries_;      // per face 3 × 3 node pairs: K's diagonal-block entry
   std::vector<Mat9> rest_tangent_;           // per element, only when some term needs it
+  BodyForceField body_force_;
 };
 
 }  // namespace kelvin

@@ -53,6 +53,8 @@ ParamDerivatives::ParamDerivatives(const FemModel& model, std::vector<ParamSlot>
     if (s.is_clamp() && (s.clamp >= static_cast<int>(model_.clamps().size()) ||
                          !model_.clamps()[s.clamp].compliant()))
       throw Error("parameter slot refers to a compliance of a clamp that is not compliant");
+    if (s.is_force() && (s.force > 2 || s.index >= model_.body_force().knots()))
+      throw Error("parameter slot refers to a body-force knot the model does not have");
   }
   update();
 }
@@ -84,6 +86,10 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
   std::vector<char> needed(nt, 0);
   for (const auto& s : slots_)
     if (s.is_material()) needed[s.term] = 1;
+  // A body-force knot's hat at t: at most two per axis are non-zero.
+  std::vector<double> hat(slots_.size(), 0.0);
+  for (std::size_t s = 0; s < slots_.size(); ++s)
+    if (slots_[s].is_force()) hat[s] = model_.body_force().hat(slots_[s].index, t);
   Eigen::Matrix<double, 3, 4> xe, ve, ae;
   Vec12 dR;
   for (int e = 0; e < model_.mesh().num_tets(); ++e) {
@@ -115,7 +121,14 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
     for (int s = 0; s < static_cast<int>(slots_.size()); ++s) {
       const ParamSlot& slot = slots_[s];
       if (slot.is_clamp()) continue;  // below, face by face
-      if (slot.is_density()) {
+      if (slot.is_force()) {
+        // The load ρ_e V_e/4 φₖ(t) on each node's component `force`, subtracted in R.
+        const double w = hat[s];
+        if (w == 0) continue;
+        dR.setZero();
+        for (int n = 0; n < 4; ++n)
+          dR[3 * n + slot.force] = -w * model_.density()[e] * el.volume / 4;
+      } else if (slot.is_density()) {
         // M_e is linear in ρ_e: ∂R/∂ρ_e = (M_e/ρ_e)(a − g + α₀ v), gravity being M g.
         Eigen::Matrix<double, 3, 4> rhs = ae + mass_damping * ve;
         rhs.colwise() -= model_.gravity();

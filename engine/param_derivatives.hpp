@@ -3,9 +3,10 @@
 /// Derivatives of the momentum residual
 ///   R(t, x, v, v'; q) = M v' + M_fc a_c + r(x, v) − f_ext
 /// with respect to per-element model quantities ("slots"): a material parameter of
-/// one term, the density, or a compliant clamp's compliance (one value, visited on
-/// the elements its faces bound). Both gradient methods consume them: forward
-/// sensitivities scatter ∂R/∂q_e into a residual, the adjoint contracts it with λ.
+/// one term, the density, a compliant clamp's compliance (one value, visited on
+/// the elements its faces bound), or a body-force field's value at one knot. Both gradient methods
+/// consume them: forward sensitivities scatter ∂R/∂q_e into a residual, the adjoint contracts it
+/// with λ.
 ///
 /// Everything is closed-form from the material's dP/dq, except where a term's
 /// stress depends on the elastic rest tangent C₀ (stiffness-proportional Rayleigh
@@ -23,11 +24,16 @@ namespace kelvin {
 
 struct ParamSlot {
   int term = -1;   // material term index into FemModel::terms(); −1 = density
-  int index = 0;   // parameter index within the term
+  int index = 0;   // parameter index within the term, or the body force's knot
   int clamp = -1;  // ≥ 0: the compliance of that (compliant) clamp
-  bool is_density() const { return term < 0 && clamp < 0; }
+  int force = -1;  // ≥ 0: the body force's axis (at knot `index`)
+  bool is_density() const { return term < 0 && clamp < 0 && force < 0; }
   bool is_clamp() const { return clamp >= 0; }
   bool is_material() const { return term >= 0; }
+  bool is_force() const { return force >= 0; }
+  bool operator==(const ParamSlot& o) const {
+    return term == o.term && index == o.index && clamp == o.clamp && force == o.force;
+  }
 };
 
 using Vec12 = Eigen::Matrix<double, 12, 1>;

@@ -147,6 +147,15 @@ inline std::string clamp_of_compliance_target(const std::string& target) {
   return target.substr(prefix.size(), target.size() - prefix.size() - suffix.size());
 }
 
+/// A body-force field per unit mass along one axis (`body_force.x|y|z`, m/s²): the
+/// target's scope sets its space basis, `knots` its hats in time (engine/body_force.hpp).
+/// The axis (0, 1, 2) of such a target, or −1.
+inline int body_force_axis(const std::string& target) {
+  for (int i = 0; i < 3; ++i)
+    if (target == std::string("body_force.") + "xyz"[i]) return i;
+  return -1;
+}
+
 /// The target of a multiplier of every elastic modulus (each parameter in Pa of every
 /// elastic term): the stiffness field scaled by one factor, 1 = the scenario's.
 inline const char* kElasticModuli = "elastic.moduli";
@@ -169,6 +178,12 @@ struct FitParameterSpec {
   /// or where that is 0 (a nested extension) the size of the scenario's quantities in
   /// the same unit (see ParameterMap::units).
   double scale = 0;
+  /// Body-force targets: hats in time inside [0, time.end] (one block of the scope's
+  /// entries per knot); every body-force target of a fit has the same knots.
+  int knots = 0;
+  /// A Gaussian prior at 0 on a linear parameter: Φ gains penalty · Σⱼ (pⱼ/scale)²,
+  /// in Φ's unit (m² s). 0: none.
+  double penalty = 0;
   int line = 0;  // 1-based line in the scenario file, for messages
 };
 

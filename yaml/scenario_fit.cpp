@@ -22,6 +22,9 @@ using yamlutil::Doc;
 using yamlutil::join;
 using Scope = FitParameterSpec::Scope;
 
+/// At most this many knots in time per body-force target.
+constexpr int kMaxForceKnots = 2000;
+
 /// What a fit target can be, and its default range and transform.
 struct TargetInfo {
   std::string name;  // the quantity's canonical name (MaterialQuantity::name)
@@ -41,6 +44,7 @@ std::vector<std::string> valid_targets(const std::vector<MaterialQuantity>& quan
   names.push_back(kRegistration);
   names.push_back("markers.<name>.offset");
   names.push_back("clamps.<name>.compliance");
+  for (const char* axis : {"x", "y", "z"}) names.push_back(std::string("body_force.") + axis);
   return names;
 }
 
@@ -86,6 +90,15 @@ TargetInfo resolve_target(const Doc& d, const Node& at, const std::string& P,
     t.positive = true;
     t.current = clamp->compliance;
     t.scalar = true;
+    return t;
+  }
+  if (body_force_axis(target) >= 0) {
+    TargetInfo t;
+    t.name = target;
+    t.unit = "m/s²";
+    t.default_lower = -1e3;  // a hundred g: far beyond a missing force, finite for the optimiser
+    t.default_upper = 1e3;
+    t.current = 0;  // the nominal model has none
     return t;
   }
   if (target == kElasticModuli) {
@@ -225,7 +238,8 @@ FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& 
   // `- elastic.mu` is short for `- { target: elastic.mu }`.
   const bool shorthand = n.IsScalar();
   if (!shorthand)
-    d.check_keys(n, P, {"target", "initial", "lower", "upper", "log", "scope", "scale"});
+    d.check_keys(
+        n, P, {"target", "initial", "lower", "upper", "log", "scope", "scale", "knots", "penalty"});
   const Node target_node = shorthand ? n : d.required(n, P, "target");
   const std::string TP = shorthand ? P : join(P, "target");
   spec.target = d.string(target_node, TP);
@@ -244,6 +258,16 @@ FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& 
     spec.scope = Scope::Global;
   } else if (const Node sc = n["scope"]; sc && sc.IsMap() && sc["legendre"]) {
     // The coefficients of a multiplier field: 0 is the scenario's field.
+    if (body_force_axis(spec.target) >= 0)
+      d.fail(sc, join(P, "scope"),
+             fmt::format("{} is a value field: its scope is global, per-region, per-element or "
+                         "boxes (a Legendre scope multiplies a quantity, and the nominal force "
+                         "is 0)",
+                         what));
+    for (const char* key : {"knots", "penalty"})
+      if (n[key])
+        d.fail(n[key], join(P, key),
+               fmt::format("applies to value parameters, not to a Legendre field's coefficients"));
     spec.scope = Scope::Legendre;
     load_legendre(d, sc, join(P, "scope"), spec);
     if (n["log"])
@@ -332,6 +356,31 @@ FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& 
     }
   }
 
+  const bool force = body_force_axis(spec.target) >= 0;
+  if (const Node k = shorthand ? Node(YAML::NodeType::Undefined) : n["knots"]) {
+    if (!force)
+      d.fail(k, join(P, "knots"),
+             fmt::format("knots are the time basis of a body force (body_force.x|y|z), not of {}",
+                         what));
+    const double v = d.number(k, join(P, "knots"));
+    if (v != std::floor(v) || v < 1 || v > kMaxForceKnots)
+      d.fail(k, join(P, "knots"),
+             fmt::format("must be a whole number from 1 to {} (got {:g})", kMaxForceKnots, v));
+    spec.knots = static_cast<int>(v);
+  } else if (force) {
+    d.fail(n, P,
+           fmt::format("{} needs 'knots': how many hats in time over [0, time.end] = [0, {:g}] s "
+                       "(resolving f Hz takes about 4 f per second)",
+                       what, s.time.end));
+  }
+  if (const Node w = shorthand ? Node(YAML::NodeType::Undefined) : n["penalty"]) {
+    spec.penalty = d.non_negative(w, join(P, "penalty"), "m² s");
+    if (spec.log)
+      d.fail(w, join(P, "penalty"),
+             fmt::format("a penalty is a Gaussian prior at 0, and {} is fitted in log space; set "
+                         "log: false",
+                         what));
+  }
   if (info.scalar && spec.scope != Scope::Global)
     d.fail(n["scope"], join(P, "scope"),
            fmt::format("{} is one value for the whole model: its scope is global", what));
@@ -415,6 +464,13 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
         d.fail(params[i], IP,
                fmt::format("'{}' with scope {} is already fitted by the entry on line {}",
                            spec.target, scope_name(spec.scope), prev.line));
+    // The model holds one body-force field, so one time basis.
+    for (const auto& prev : f.parameters)
+      if (spec.knots && prev.knots && spec.knots != prev.knots)
+        d.fail(params[i]["knots"], join(IP, "knots"),
+               fmt::format("{} knots, but the body force on line {} has {}: one field, one time "
+                           "basis",
+                           spec.knots, prev.line, prev.knots));
     f.parameters.push_back(std::move(spec));
   }
 
