@@ -19,7 +19,9 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
   if (!n || n.IsNull()) return s;
   const std::string P = "diagnose";
   d.require_map(n, P);
-  d.check_keys(n, P, {"candidates", "refits", "refit_evaluations", "significance", "validate"});
+  d.check_keys(
+      n, P,
+      {"candidates", "refits", "refit_evaluations", "significance", "validate", "missing_force"});
   if (const YAML::Node c = n["candidates"]) {
     d.require_sequence(c, join(P, "candidates"));
     std::vector<std::string> known = candidate_ids();
@@ -49,6 +51,35 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
     if (!(v > 0 && v < 0.5))
       d.fail(a, join(P, "significance"), fmt::format("must lie in (0, 0.5) (got {:g})", v));
     s.alpha = v;
+  }
+  if (const YAML::Node f = n["missing_force"]) {
+    const std::string FP = join(P, "missing_force");
+    MissingForceSettings& m = s.missing_force;
+    if (f.IsScalar()) {
+      m.enabled = d.choice(f, FP, {"true", "false"}) == "true";
+    } else {
+      d.require_map(f, FP);
+      d.check_keys(f, FP, {"evaluations", "knots_per_second", "segments"});
+      if (const YAML::Node v = f["evaluations"]) {
+        const long k = d.integer(v, join(FP, "evaluations"));
+        if (k < 1 || k > 100000)
+          d.fail(v, join(FP, "evaluations"), fmt::format("must be in [1, 100000] (got {})", k));
+        m.evaluations = static_cast<int>(k);
+      }
+      if (const YAML::Node v = f["knots_per_second"]) {
+        const double k = d.number(v, join(FP, "knots_per_second"));
+        if (!(k > 0 && k <= 1000))
+          d.fail(v, join(FP, "knots_per_second"),
+                 fmt::format("must be in (0, 1000] (got {:g})", k));
+        m.knots_per_second = k;
+      }
+      if (const YAML::Node v = f["segments"]) {
+        const long k = d.integer(v, join(FP, "segments"));
+        if (k < 1 || k > 100)
+          d.fail(v, join(FP, "segments"), fmt::format("must be in [1, 100] (got {})", k));
+        m.segments = static_cast<int>(k);
+      }
+    }
   }
   if (const YAML::Node v = n["validate"]) {
     d.require_sequence(v, join(P, "validate"));

@@ -320,6 +320,53 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       fmt::format("  nominal rms {:.4f} mm per coordinate; noise {:.4f} mm (from {} third "
                   "differences)",
                   d.nominal_train.rms * 1e3, d.noise.sigma * 1e3, d.noise.differences));
+  d.seconds.screening = since(t0);
+  if (d.settings.missing_force.enabled && !stopped()) {
+    const auto tf = Clock::now();
+    MissingForceSettings mfs = d.settings.missing_force;
+    if (mfs.knots_per_second <= 0) {
+      // Four knots per period at the top of the band that brings the residual's power
+      // to 90 %, but no faster than the observed motion (95 % of its power; a short
+      // capture leaks the rest upwards): a noise residual is white, and a force above
+      // the motion's band would only fit noise.
+      const auto top = [&](double fraction, bool residual) {
+        double cumulative = 0, f = 0;
+        for (const auto& b : d.where.bands) {
+          f = b.f1;
+          if ((cumulative += residual ? b.residual_fraction : b.signal_fraction) >= fraction) break;
+        }
+        return f;
+      };
+      mfs.knots_per_second =
+          4 * std::max(std::min(top(0.9, true), top(0.95, false)), 1 / nominal.time.end);
+    }
+    say(fmt::format("  missing force: {} knots in time × {} segments × 3 axes, {} evaluations",
+                    std::lround(mfs.knots_per_second * nominal.time.end), mfs.segments,
+                    mfs.evaluations));
+    d.missing_force = fit_missing_force(*base.problem, nominal, p_nominal, axis, d.noise.sigma, mfs,
+                                        (out / "missing-force").string(), o.interrupt, o.progress);
+    if (MissingForce& f = d.missing_force; f.ok) {
+      f.statistic = d.nominal_train.samples *
+                    (f.rms_before * f.rms_before - f.rms_after * f.rms_after) /
+                    (d.noise.sigma * d.noise.sigma);
+      f.threshold = chi_square_quantile(d.settings.alpha, f.dof);
+    }
+    if (d.missing_force.ok) {
+      std::string shares;
+      for (const auto& r : d.missing_force.regions)
+        shares += fmt::format("{}{} {:.0f} %", shares.empty() ? "" : ", ", r.name, 100 * r.share);
+      say(
+          fmt::format("  missing force: rms {:.4f} → {:.4f} mm (LR {:.1f}; noise alone stays "
+                      "below {:.1f}); most in the {} ({}), peak at {:.3g} s",
+                      d.missing_force.rms_before * 1e3, d.missing_force.rms_after * 1e3,
+                      d.missing_force.statistic, d.missing_force.threshold, d.missing_force.where,
+                      shares, d.missing_force.peak_time));
+    } else {
+      say("  missing force: not found: " + d.missing_force.error);
+    }
+    d.seconds.missing_force = since(tf);
+    t0 = Clock::now();
+  }
 
   std::vector<std::pair<std::string, std::vector<int>>> groups;
   ScreeningOptions so;
@@ -347,7 +394,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     d.candidates[c].direction = screening_directions()[best];
     start_scores[static_cast<int>(c)] = s[best];
   }
-  d.seconds.screening = since(t0);
+  d.seconds.screening += since(t0);
   for (const auto& rc : d.ranking.order)
     say(fmt::format(
         "  {:<22} LM {:10.1f}  (threshold {:7.1f}, dof {})  predicted rms "

@@ -3,7 +3,8 @@
 /// `kelvin diagnose`: the sim-to-real gap of a nominal model, in stages.
 ///  1. Nominal fit on the training experiments; the noise level from the residual's
 ///     fast part (diagnose/noise).
-///  2. Where: residual tables per marker, window, band and region (diagnose/where).
+///  2. Where: residual tables per marker, window, band and region (diagnose/where),
+///     and the missing-force field of the nominal model (diagnose/missing_force).
 ///  3. Which: every candidate effect (diagnose/candidates) scored at the nominal fit
 ///     from one forward-sensitivity solve, ranked greedily (diagnose/ranking), the top
 ///     ones refitted with the nominal parameters free and checked on held-out motions.
@@ -20,6 +21,7 @@
 
 #include "diagnose/candidates.hpp"
 #include "diagnose/diagnose_settings.hpp"
+#include "diagnose/missing_force.hpp"
 #include "diagnose/noise.hpp"
 #include "diagnose/ranking.hpp"
 #include "diagnose/where.hpp"
@@ -69,7 +71,8 @@ struct RefitResult {
 };
 
 struct StageTimes {
-  double nominal_fit = 0, screening = 0, refits = 0, heldout = 0, second_screening = 0;
+  double nominal_fit = 0, missing_force = 0, screening = 0, refits = 0, heldout = 0,
+         second_screening = 0;
 };
 
 struct Diagnosis {
@@ -86,6 +89,7 @@ struct Diagnosis {
   NoiseEstimate noise;
   // Stage 2
   ResidualTables where;
+  MissingForce missing_force;  // of the nominal model (ok false when not run)
   // Stage 3
   Ranking ranking;
   std::vector<RefitResult> refits;

@@ -204,6 +204,14 @@ TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
   EXPECT_GT(a.heldout[0].before.rms, 2 * a.heldout[0].after.rms);
   ASSERT_EQ(a.parameters.size(), 1u);
   EXPECT_NEAR(a.parameters[0].value, 40, 4);
+  // The missing force explains the gap and sits where the drag −cρv is largest,
+  // at the free end, which moves most.
+  const MissingForce& f = d.missing_force;
+  ASSERT_TRUE(f.ok) << f.error;
+  EXPECT_GT(f.statistic, f.threshold);
+  EXPECT_LT(f.rms_after, 0.3 * f.rms_before);
+  EXPECT_EQ(f.where, "free end");
+  EXPECT_TRUE(fs::exists(dir / "out" / "missing-force" / "body-force.pvd"));
   // Screened again with the drag in the model, nothing else is left to explain.
   EXPECT_FALSE(d.second_ranking.order.empty());
   EXPECT_EQ(d.second_candidate, -1);
@@ -226,6 +234,9 @@ TEST(Diagnosis, FindsNoEffectWhereThereIsNone) {
   EXPECT_LT(d.nominal_train.rms, 1.3 * d.noise.sigma);
   EXPECT_TRUE(std::none_of(d.ranking.order.begin(), d.ranking.order.end(),
                            [](const RankedCandidate& r) { return r.significant; }));
+  // With nothing missing, the field fits no more than noise would let it.
+  ASSERT_TRUE(d.missing_force.ok) << d.missing_force.error;
+  EXPECT_LT(d.missing_force.statistic, d.missing_force.threshold);
 }
 
 }  // namespace

@@ -1,0 +1,176 @@
+#include "diagnose/missing_force.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+
+#include "drivers/body_force_outputs.hpp"
+#include "drivers/fit_loop.hpp"
+#include "drivers/fitted_scenario.hpp"
+#include "engine/error.hpp"
+#include "engine/output.hpp"
+#include "yaml/scenario_paths.hpp"
+#include "yaml/yaml_util.hpp"
+
+namespace kelvin {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// `segments` boxes along the body's axis, each spanning the mesh across it (a
+/// little wider, so that every centroid lies in one; the first that holds it wins).
+YAML::Node axis_boxes(const Mesh& mesh, const BodyAxis& axis, int segments) {
+  const Eigen::Vector3d lo = mesh.nodes.rowwise().minCoeff(), hi = mesh.nodes.rowwise().maxCoeff();
+  const double pad = 1e-6 * (hi - lo).norm();
+  YAML::Node boxes(YAML::NodeType::Sequence);
+  for (int k = 0; k < segments; ++k) {
+    const double a = axis.clamp_end + (axis.free_end - axis.clamp_end) * k / segments;
+    const double b = axis.clamp_end + (axis.free_end - axis.clamp_end) * (k + 1) / segments;
+    Eigen::Vector3d mn = lo.array() - pad, mx = hi.array() + pad;
+    mn[axis.axis] = std::min(a, b) - pad;
+    mx[axis.axis] = std::max(a, b) + pad;
+    YAML::Node box;
+    for (int i = 0; i < 3; ++i) {
+      box["min"].push_back(mn[i]);
+      box["max"].push_back(mx[i]);
+    }
+    box["min"].SetStyle(YAML::EmitterStyle::Flow);
+    box["max"].SetStyle(YAML::EmitterStyle::Flow);
+    boxes.push_back(box);
+  }
+  return boxes;
+}
+
+/// The median spacing of the capture's frames (s).
+double frame_spacing(const Scenario& s) {
+  const auto& t = s.markers.observed.times;
+  std::vector<double> dt;
+  for (std::size_t k = 1; k < t.size(); ++k)
+    if (t[k] > t[k - 1]) dt.push_back(t[k] - t[k - 1]);
+  if (dt.empty()) return s.time.end;
+  std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
+  return dt[dt.size() / 2];
+}
+
+}  // namespace
+
+MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
+                               const Eigen::VectorXd& p_nominal, const BodyAxis& axis, double sigma,
+                               const MissingForceSettings& settings, const std::string& dir,
+                               const std::atomic<bool>* interrupt,
+                               const std::function<void(const std::string&)>& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  MissingForce mf;
+  fs::create_directories(dir);
+  // The nominal model at its fit, as a scenario of its own: the field is fitted
+  // with the nominal parameters held.
+  FemModel& nominal_model = problem.experiment(0).model();
+  problem.map().apply(p_nominal, nominal_model);
+  const std::string held = write_fitted_scenario(nominal, problem.map(), nominal_model, dir);
+
+  // At most one knot per two frames: the capture resolves no faster force.
+  const double dt = frame_spacing(nominal);
+  mf.knots = static_cast<int>(
+      std::clamp(std::round(settings.knots_per_second * nominal.time.end), 1.0,
+                 std::clamp(std::floor(0.5 * nominal.time.end / dt), 1.0, 2000.0)));
+  mf.segments = settings.segments;
+  const double g = nominal.gravity.norm() > 0 ? nominal.gravity.norm() : 1.0;
+  // MAP with noise σ per coordinate and frame (Φ ≈ ½ Δt ‖r‖²) and a prior of size g
+  // per coefficient: Φ + ½ σ² Δt Σ (a/g)².
+  const double penalty = 0.5 * sigma * sigma * dt;
+  const yamlutil::Doc doc(held);
+  YAML::Node root = YAML::Clone(doc.root());
+  root.remove("diagnose");
+  YAML::Node fit = yaml_child(root, "fit");
+  fit = fit.IsDefined() && fit.IsMap() ? YAML::Clone(fit) : YAML::Node(YAML::NodeType::Map);
+  for (const char* key : {"experiments", "lcurve", "smoothness", "max_evaluations"})
+    fit.remove(key);
+  YAML::Node params(YAML::NodeType::Sequence);
+  for (const char* target : {"body_force.x", "body_force.y", "body_force.z"}) {
+    YAML::Node p;
+    p["target"] = target;
+    p["knots"] = mf.knots;
+    p["penalty"] = penalty;
+    p["scale"] = g;
+    p["scope"]["boxes"] = axis_boxes(nominal.mesh, axis, mf.segments);
+    params.push_back(p);
+  }
+  fit["parameters"] = params;
+  fit["start_rtol"] = nominal.solver.rtol;
+  root["fit"] = fit;
+  YAML::Emitter e;
+  e << root;
+  const std::string path = (fs::path(dir) / "missing-force.yaml").string();
+  write_file_atomic(path, fmt::format("# Written by kelvin diagnose: the body-force field that "
+                                      "makes the nominal model follow the capture.\n{}\n",
+                                      e.c_str()));
+
+  try {
+    const Scenario s = load_scenario(path);
+    FitProblem force(s, s.fit.parameters);
+    FitOptions o = fit_options_of(s);
+    o.max_evaluations = settings.evaluations;
+    o.gradient.interrupt = interrupt;
+    o.on_evaluation = [&](const FitRecord& r) {
+      if (progress && r.accepted)
+        progress(fmt::format("  missing force: eval {:3d}  rms {:8.4f} mm  {:7.1f} s", r.evaluation,
+                             r.rms / std::sqrt(3.0) * 1e3, r.seconds));
+    };
+    const FitOutcome out = run_fit(force, force.map().initial(), o);
+    mf.evaluations = out.evaluations;
+    if (!out.best.evaluation || out.history.empty()) {
+      mf.error = out.history.empty() ? out.stop_reason : out.history.back().error;
+      return mf;
+    }
+    // Per coordinate: Φ integrates ‖x − x̄‖², three coordinates' squares.
+    mf.rms_before = out.history.front().rms / std::sqrt(3.0);
+    mf.rms_after = out.best.rms / std::sqrt(3.0);
+    mf.dof = force.map().size();
+    FemModel& model = force.experiment(0).model();
+    force.map().apply(out.p, model);
+    mf.files = write_body_force(model, dir);
+
+    // Summaries per third of the body and per knot.
+    const Mesh& mesh = model.mesh();
+    const BodyForceField& field = model.body_force();
+    const char* names[3] = {"clamp zone", "middle", "free end"};
+    double energy[3] = {0, 0, 0}, volume[3] = {0, 0, 0};
+    std::vector<double> per_knot(field.knots(), 0.0);
+    for (int el = 0; el < mesh.num_tets(); ++el) {
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 4; ++a) c += 0.25 * mesh.nodes.col(mesh.tets(a, el));
+      const int r = std::clamp(static_cast<int>(3 * axis.along(c)), 0, 2);
+      const double V = model.elements()[el].volume, rho = model.density()[el];
+      volume[r] += V;
+      for (int k = 0; k < field.knots(); ++k) {
+        double f2 = 0;
+        for (int i = 0; i < 3; ++i) f2 += std::pow(rho * field.value(i, k, el), 2);
+        energy[r] += V * f2;
+        per_knot[k] += V * f2;
+      }
+    }
+    const double total = energy[0] + energy[1] + energy[2];
+    int top = 0;
+    for (int r = 0; r < 3; ++r) {
+      MissingForceRegion region;
+      region.name = names[r];
+      region.rms_force = volume[r] > 0 ? std::sqrt(energy[r] / (volume[r] * field.knots())) : 0;
+      region.share = total > 0 ? energy[r] / total : 0;
+      if (energy[r] > energy[top]) top = r;
+      mf.regions.push_back(region);
+    }
+    mf.where = names[top];
+    mf.peak_time = field.knot_time(
+        static_cast<int>(std::max_element(per_knot.begin(), per_knot.end()) - per_knot.begin()));
+    mf.ok = true;
+  } catch (const Error& err) {
+    mf.error = err.what();
+  }
+  mf.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return mf;
+}
+
+}  // namespace kelvin
