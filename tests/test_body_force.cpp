@@ -7,11 +7,11 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
-#include "adjoint/gradient_check.hpp"
 #include "adjoint/marker_trajectory.hpp"
 #include "drivers/fit_loop.hpp"
 #include "engine/csv.hpp"
 #include "engine/error.hpp"
+#include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
@@ -62,14 +62,7 @@ TEST(BodyForce, TheGradientOfAFieldInBoxesAndTimeAgreesThreeWays) {
   FitProblem problem(s, s.fit.parameters);
   ASSERT_EQ(problem.map().size(), 1 + 2 * 3 + 3);
   EXPECT_EQ(problem.map().label(1), "body_force.y[box 0][t 0.025 s]");
-  GradientCheckOptions o;
-  o.max_parameters = problem.map().size();
-  const GradientCheckReport r = check_gradient(problem, problem.map().initial(), o);
-  ASSERT_TRUE(r.ok) << r.error;
-  EXPECT_LT(r.adjoint_vs_forward, 1e-6) << "adjoint\n" << r.adjoint << "\nforward\n" << r.forward;
-  EXPECT_LT(r.adjoint_vs_fd, 1e-4) << "adjoint\n" << r.adjoint << "\nFD\n" << r.finite_difference;
-  EXPECT_GE(r.slope, 1.9);
-  EXPECT_LE(r.slope, 2.1);
+  test::expect_gradients_agree(problem);
 }
 
 TEST(BodyForce, AFieldThatMadeTheTracksIsRecoveredFromZero) {
@@ -141,8 +134,9 @@ TEST(BodyForce, TheScenarioRefusesWhatHasNoMeaning) {
             std::string::npos);
   EXPECT_NE(refusal(dir, "    - { target: body_force.y, knots: 2.5 }").find("whole number"),
             std::string::npos);
-  EXPECT_NE(refusal(dir, "    - { target: body_force.y, knots: 2 }\n"
-                         "    - { target: body_force.z, knots: 3 }")
+  EXPECT_NE(refusal(dir,
+                    "    - { target: body_force.y, knots: 2 }\n"
+                    "    - { target: body_force.z, knots: 3 }")
                 .find("one field, one time basis"),
             std::string::npos);
   EXPECT_NE(

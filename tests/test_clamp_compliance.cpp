@@ -9,10 +9,10 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
-#include "adjoint/gradient_check.hpp"
 #include "engine/csv.hpp"
 #include "engine/error.hpp"
 #include "engine/simulation.hpp"
+#include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
@@ -147,14 +147,7 @@ TEST(ClampCompliance, TheComplianceGradientAgreesThreeWays) {
   const Scenario s = load_scenario((dir / "fit.yaml").string());
   FitProblem problem(
       s, {positive_fit_parameter("clamps.base.compliance"), positive_fit_parameter("elastic.mu")});
-  GradientCheckOptions o;
-  o.max_parameters = problem.map().size();
-  const GradientCheckReport r = check_gradient(problem, problem.map().initial(), o);
-  ASSERT_TRUE(r.ok) << r.error;
-  EXPECT_LT(r.adjoint_vs_forward, 1e-6) << "adjoint\n" << r.adjoint << "\nforward\n" << r.forward;
-  EXPECT_LT(r.adjoint_vs_fd, 1e-4) << "adjoint\n" << r.adjoint << "\nFD\n" << r.finite_difference;
-  EXPECT_GE(r.slope, 1.9);
-  EXPECT_LE(r.slope, 2.1);
+  test::expect_gradients_agree(problem);
 }
 
 TEST(ClampCompliance, TheScenarioRefusesWhatHasNoMeaning) {

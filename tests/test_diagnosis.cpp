@@ -68,10 +68,22 @@ TEST(DiagnoseSettings, BadEntriesAreRefusedWithTheirPlace) {
   EXPECT_NE(refusal("  validate: [missing.yaml]\n").find("diagnose.validate[0]"),
             std::string::npos);
   EXPECT_NE(refusal("  refit: 3\n").find("diagnose.refit"), std::string::npos);
+  EXPECT_NE(refusal("  missing_force: maybe\n").find("diagnose.missing_force"), std::string::npos);
+  EXPECT_NE(refusal("  missing_force: { segments: 0 }\n")
+                .find("diagnose.missing_force.segments: must be in [1, 100]"),
+            std::string::npos);
+  EXPECT_NE(refusal("  missing_force: { knots_per_second: -2 }\n")
+                .find("diagnose.missing_force.knots_per_second"),
+            std::string::npos);
+  EXPECT_NE(refusal("  missing_force: { knots: 3 }\n").find("diagnose.missing_force.knots"),
+            std::string::npos);
   test::write_text(dir / "ok.yaml", "name: s\n");
   const DiagnoseSettings d = load_diagnose_settings((dir / "ok.yaml").string());
   EXPECT_EQ(d.refits, 3);
   EXPECT_TRUE(d.candidates.empty());
+  EXPECT_TRUE(d.missing_force.enabled);
+  test::write_text(dir / "off.yaml", "name: s\ndiagnose:\n  missing_force: false\n");
+  EXPECT_FALSE(load_diagnose_settings((dir / "off.yaml").string()).missing_force.enabled);
 }
 
 const std::string kNominal = R"(  density: 1100

@@ -12,9 +12,9 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
-#include "adjoint/gradient_check.hpp"
 #include "drivers/fit_loop.hpp"
 #include "engine/csv.hpp"
+#include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
@@ -168,14 +168,7 @@ TEST(Extensions, GradientsOfEveryExtensionAgreeThreeWays) {
       s, {positive_fit_parameter("elastic.c2"), positive_fit_parameter("elastic.k"),
           linear_fit_parameter("elastic.theta", -4, 4), positive_fit_parameter("viscous.h"),
           positive_fit_parameter("viscous.c"), moduli, density, clock, offset, registration});
-  GradientCheckOptions o;
-  o.max_parameters = problem.map().size();
-  const GradientCheckReport r = check_gradient(problem, problem.map().initial(), o);
-  ASSERT_TRUE(r.ok) << r.error;
-  EXPECT_LT(r.adjoint_vs_forward, 1e-6) << "adjoint\n" << r.adjoint << "\nforward\n" << r.forward;
-  EXPECT_LT(r.adjoint_vs_fd, 1e-4) << "adjoint\n" << r.adjoint << "\nFD\n" << r.finite_difference;
-  EXPECT_GE(r.slope, 1.9);
-  EXPECT_LE(r.slope, 2.1);
+  test::expect_gradients_agree(problem);
 }
 
 // Data made with the effect on, fitted from the nominal value: the effect comes back.

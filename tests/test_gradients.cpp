@@ -13,6 +13,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/gradient_check.hpp"
 #include "engine/simulation.hpp"
+#include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
@@ -83,13 +84,7 @@ FitParameterSpec param(const std::string& target,
   return positive_fit_parameter(target, scope);
 }
 
-void expect_methods_agree(const GradientCheckReport& r) {
-  ASSERT_TRUE(r.ok) << r.error;
-  EXPECT_LT(r.adjoint_vs_forward, 1e-6) << "adjoint\n" << r.adjoint << "\nforward\n" << r.forward;
-  EXPECT_LT(r.adjoint_vs_fd, 1e-4) << "adjoint\n" << r.adjoint << "\nFD\n" << r.finite_difference;
-  EXPECT_GE(r.slope, 1.9);
-  EXPECT_LE(r.slope, 2.1);
-}
+using test::expect_methods_agree;
 
 TEST(Gradients, GlobalNeoHookeanPowerLawAndDensity) {
   const fs::path dir = scratch("global");
