@@ -12,6 +12,18 @@ namespace kelvin {
 
 using yamlutil::join;
 
+namespace {
+
+/// An integer in [lo, hi], refused with its place otherwise.
+int bounded_integer(const yamlutil::Doc& d, const YAML::Node& n, const std::string& path, long lo,
+                    long hi) {
+  const long v = d.integer(n, path);
+  if (v < lo || v > hi) d.fail(n, path, fmt::format("must be in [{}, {}] (got {})", lo, hi, v));
+  return static_cast<int>(v);
+}
+
+}  // namespace
+
 DiagnoseSettings load_diagnose_settings(const std::string& path) {
   const yamlutil::Doc d(path);
   DiagnoseSettings s;
@@ -35,16 +47,10 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
     }
   }
   if (const YAML::Node r = n["refits"]) {
-    const long v = d.integer(r, join(P, "refits"));
-    if (v < 0 || v > 20)
-      d.fail(r, join(P, "refits"), fmt::format("must be in [0, 20] (got {})", v));
-    s.refits = static_cast<int>(v);
+    s.refits = bounded_integer(d, r, join(P, "refits"), 0, 20);
   }
   if (const YAML::Node r = n["refit_evaluations"]) {
-    const long v = d.integer(r, join(P, "refit_evaluations"));
-    if (v < 1 || v > 100000)
-      d.fail(r, join(P, "refit_evaluations"), fmt::format("must be in [1, 100000] (got {})", v));
-    s.refit_evaluations = static_cast<int>(v);
+    s.refit_evaluations = bounded_integer(d, r, join(P, "refit_evaluations"), 1, 100000);
   }
   if (const YAML::Node a = n["significance"]) {
     const double v = d.number(a, join(P, "significance"));
@@ -61,10 +67,7 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
       d.require_map(f, FP);
       d.check_keys(f, FP, {"evaluations", "knots_per_second", "segments"});
       if (const YAML::Node v = f["evaluations"]) {
-        const long k = d.integer(v, join(FP, "evaluations"));
-        if (k < 1 || k > 100000)
-          d.fail(v, join(FP, "evaluations"), fmt::format("must be in [1, 100000] (got {})", k));
-        m.evaluations = static_cast<int>(k);
+        m.evaluations = bounded_integer(d, v, join(FP, "evaluations"), 1, 100000);
       }
       if (const YAML::Node v = f["knots_per_second"]) {
         const double k = d.number(v, join(FP, "knots_per_second"));
@@ -74,10 +77,7 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
         m.knots_per_second = k;
       }
       if (const YAML::Node v = f["segments"]) {
-        const long k = d.integer(v, join(FP, "segments"));
-        if (k < 1 || k > 100)
-          d.fail(v, join(FP, "segments"), fmt::format("must be in [1, 100] (got {})", k));
-        m.segments = static_cast<int>(k);
+        m.segments = bounded_integer(d, v, join(FP, "segments"), 1, 100);
       }
     }
   }
