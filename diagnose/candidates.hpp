@@ -53,8 +53,9 @@ BodyAxis body_axis(const Scenario& scenario);
 /// Newtonian term, a marker offset an observed marker), in a fixed order.
 std::vector<Candidate> builtin_candidates(const Scenario& scenario);
 
-/// Identifiers the diagnosis knows, for the `diagnose.candidates` check; with those
-/// not built yet (no extension for them exists) and why.
+/// Identifiers the diagnosis knows, for the `diagnose.candidates` check ("unnamed",
+/// the learned correction of diagnose/learned_correction, is not screened: it is
+/// refitted when no named candidate passes); with those not built yet and why.
 const std::vector<std::string>& candidate_ids();
 const std::vector<std::pair<std::string, std::string>>& unavailable_candidates();
 

@@ -36,6 +36,7 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
       {"candidates", "refits", "refit_evaluations", "significance", "validate", "missing_force"});
   if (const YAML::Node c = n["candidates"]) {
     d.require_sequence(c, join(P, "candidates"));
+    s.learned_correction = false;
     std::vector<std::string> known = candidate_ids();
     for (const auto& [id, why] : unavailable_candidates()) known.push_back(id);
     for (std::size_t i = 0; i < c.size(); ++i) {
@@ -43,8 +44,15 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
       const std::string id = d.choice(c[i], key, known);
       for (const auto& [missing, why] : unavailable_candidates())
         if (id == missing) d.fail(c[i], key, fmt::format("'{}' cannot be screened: {}", id, why));
-      s.candidates.push_back(id);
+      if (id == "unnamed")
+        s.learned_correction = true;
+      else
+        s.candidates.push_back(id);
     }
+    if (s.candidates.empty())
+      d.fail(c, join(P, "candidates"),
+             "names no candidate to screen ('unnamed' is refitted only when the named ones "
+             "fail)");
   }
   if (const YAML::Node r = n["refits"]) {
     s.refits = bounded_integer(d, r, join(P, "refits"), 0, 20);

@@ -10,17 +10,20 @@ namespace kelvin {
 /// The missing-force field of the "where" stage (diagnose/missing_force.hpp).
 struct MissingForceSettings {
   bool enabled = true;
-  int evaluations = 20;          // fit evaluations (each one forward + adjoint run)
+  int evaluations = 20;  // fit evaluations (each one forward + adjoint run)
   /// Time resolution (resolves about a quarter of it in Hz); 0: four per period at
   /// the top of the band below which 90 % of the nominal residual's power lies (or
   /// 95 % of the observed motion's, if lower).
   double knots_per_second = 0;
-  int segments = 6;              // boxes along the body's axis
+  int segments = 6;  // boxes along the body's axis
 };
 
 struct DiagnoseSettings {
   std::vector<std::string> candidates;  // identifiers; empty = every built-in that applies
-  int refits = 3;                       // top candidates refitted
+  /// The learned correction after failed named refits: on by default, and with a
+  /// candidates list only when it names "unnamed".
+  bool learned_correction = true;
+  int refits = 3;  // top candidates refitted
   /// Evaluations a refit may take: its verdict rests on misfit differences far above
   /// the last digits a long tail of L-BFGS iterations buys.
   int refit_evaluations = 40;

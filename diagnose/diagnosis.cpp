@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/QR>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -14,6 +15,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
 #include "diagnose/extended_scenario.hpp"
+#include "diagnose/learned_correction.hpp"
 #include "drivers/fit_loop.hpp"
 #include "drivers/fitted_scenario.hpp"
 #include "engine/error.hpp"
@@ -65,6 +67,7 @@ MisfitFigures misfit(FitProblem& problem, const Eigen::VectorXd& p,
   }
   f.ok = true;
   f.residual = g.residual;
+  f.entries = g.samples;
   f.samples = static_cast<int>(g.residual.size());
   f.sum_sq = g.residual.squaredNorm();
   f.rms = f.samples ? std::sqrt(f.sum_sq / f.samples) : 0;
@@ -214,6 +217,27 @@ std::string field_region(const Model& m, const Eigen::VectorXd& p, const Scenari
   return "whole body";
 }
 
+/// The missing force's likelihood-ratio statistic N (rms₀² − rms²)/σ̂² against the
+/// χ² quantile of its degrees of freedom.
+void judge(MissingForce& f, int samples, double sigma, double alpha) {
+  if (!f.ok) return;
+  f.statistic =
+      samples * (f.rms_before * f.rms_before - f.rms_after * f.rms_after) / (sigma * sigma);
+  f.threshold = chi_square_quantile(alpha, f.dof);
+}
+
+std::string describe(const MissingForce& f) {
+  if (!f.ok) return "not found: " + f.error;
+  std::string shares;
+  for (const auto& r : f.regions)
+    shares += fmt::format("{}{} {:.0f} %", shares.empty() ? "" : ", ", r.name, 100 * r.share);
+  return fmt::format(
+      "rms {:.4f} → {:.4f} mm (LR {:.1f}; noise alone stays below {:.1f}); most in the {} "
+      "({}), peak at {:.3g} s",
+      f.rms_before * 1e3, f.rms_after * 1e3, f.statistic, f.threshold, f.where, shares,
+      f.peak_time);
+}
+
 std::string slug(const Candidate& c) {
   std::string s = c.id;
   if (!c.where.empty() && c.id == "marker_offset") s += "-" + c.where;
@@ -321,9 +345,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                   "differences)",
                   d.nominal_train.rms * 1e3, d.noise.sigma * 1e3, d.noise.differences));
   d.seconds.screening = since(t0);
+  MissingForceSettings mfs = d.settings.missing_force;
   if (d.settings.missing_force.enabled && !stopped()) {
     const auto tf = Clock::now();
-    MissingForceSettings mfs = d.settings.missing_force;
     if (mfs.knots_per_second <= 0) {
       // Four knots per period at the top of the band that brings the residual's power
       // to 90 %, but no faster than the observed motion (95 % of its power; a short
@@ -345,25 +369,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                     mfs.evaluations));
     d.missing_force = fit_missing_force(*base.problem, nominal, p_nominal, axis, d.noise.sigma, mfs,
                                         (out / "missing-force").string(), o.interrupt, o.progress);
-    if (MissingForce& f = d.missing_force; f.ok) {
-      f.statistic = d.nominal_train.samples *
-                    (f.rms_before * f.rms_before - f.rms_after * f.rms_after) /
-                    (d.noise.sigma * d.noise.sigma);
-      f.threshold = chi_square_quantile(d.settings.alpha, f.dof);
-    }
-    if (d.missing_force.ok) {
-      std::string shares;
-      for (const auto& r : d.missing_force.regions)
-        shares += fmt::format("{}{} {:.0f} %", shares.empty() ? "" : ", ", r.name, 100 * r.share);
-      say(
-          fmt::format("  missing force: rms {:.4f} → {:.4f} mm (LR {:.1f}; noise alone stays "
-                      "below {:.1f}); most in the {} ({}), peak at {:.3g} s",
-                      d.missing_force.rms_before * 1e3, d.missing_force.rms_after * 1e3,
-                      d.missing_force.statistic, d.missing_force.threshold, d.missing_force.where,
-                      shares, d.missing_force.peak_time));
-    } else {
-      say("  missing force: not found: " + d.missing_force.error);
-    }
+    judge(d.missing_force, d.nominal_train.samples, d.noise.sigma, d.settings.alpha);
+    say("  missing force: " + describe(d.missing_force));
     d.seconds.missing_force = since(tf);
     t0 = Clock::now();
   }
@@ -419,6 +426,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                       d.settings.validate[k]));
     HeldOutFigures f;
     f.path = d.settings.validate[k];
+    f.marker_names = h.problem->experiment(0).objective().names();
     f.before = misfit(*h.problem, p_nominal, o.interrupt);
     if (!f.before.ok) throw Error(fmt::format("{}: {}", f.path, f.before.error));
     say(fmt::format("  held-out {}: nominal rms {:.4f} mm", fs::path(f.path).filename().string(),
@@ -485,10 +493,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       std::min<int>({d.settings.refits, static_cast<int>(order.size()), std::max(passing, 1)});
   say(fmt::format("stage 3: refits of the top {} candidates ({} cleared the screening threshold)",
                   K, passing));
-  for (int r = 0; r < K && !stopped(); ++r) {
-    const int c = order[r];
+  // One candidate's refit with the nominal parameters free, from `start(model,
+  // entries)` (the candidate's entries of the model's map), and its held-out checks.
+  using Start = std::function<Eigen::VectorXd(Model&, const std::vector<int>&)>;
+  const auto refit = [&](int c, const Start& start) {
     const Candidate& cand = d.candidates[c];
-    const CandidateScore& score = start_scores.count(c) ? start_scores.at(c) : marginal.at(c);
     RefitResult res;
     res.candidate = c;
     const std::string name = slug(cand);
@@ -497,24 +506,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     const ParameterMap& map = model.problem->map();
     const std::vector<int> entries = entries_of(model, model.extended.candidate_specs[0]);
     res.dof = static_cast<int>(entries.size());
-    // Start at the joint Gauss–Newton step of screening: the effect and the nominal
-    // parameters that compensated for its absence (a clock lag fitted as viscosity).
-    Eigen::VectorXd p0 = map.initial();
-    p0.head(n_nominal) = p_nominal;
-    if (score.fitted_step.size() == n_nominal) p0.head(n_nominal) += score.fitted_step;
-    const Eigen::VectorXd lower = map.lower(), upper = map.upper();
-    if (cand.id == "anisotropy") {
-      if (score.step.size() == 1) p0[entries[0]] = score.step[0];
-    } else if (entries.size() == groups[c].second.size()) {
-      for (std::size_t a = 0; a < score.active.size(); ++a) {
-        const long k =
-            std::find(groups[c].second.begin(), groups[c].second.end(), score.active[a]) -
-            groups[c].second.begin();
-        p0[entries[k]] += score.step[a];
-      }
-    }
-    if (probe_start.count(c)) p0 = probe_start.at(c);
-    p0 = p0.cwiseMax(lower).cwiseMin(upper);
+    const Eigen::VectorXd p0 = start(model, entries).cwiseMax(map.lower()).cwiseMin(map.upper());
     const double refit_ftol = precision(d.nominal_train.residual, d.noise.sigma);
     FitRun fit = fit_model(model, p0, (state / (name + ".csv")).string(), o, name, refit_ftol,
                            d.settings.refit_evaluations);
@@ -528,14 +520,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     res.evaluations = fit.evaluations;
     if (!fit.ok) {
       res.error = fit.error;
-      d.refits.push_back(res);
-      continue;
+      return res;
     }
     res.train = misfit(*model.problem, fit.p, o.interrupt);
     if (!res.train.ok) {
       res.error = res.train.error;
-      d.refits.push_back(res);
-      continue;
+      return res;
     }
     res.ok = true;
     res.statistic = (d.nominal_train.sum_sq - res.train.sum_sq) / sigma2;
@@ -543,6 +533,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     res.bic = res.train.sum_sq / sigma2 + (n_nominal + res.dof) * std::log(N);
     res.passes_training = res.statistic > res.threshold;
     res.parameters = named_values(map, fit.p, entries);
+    res.nominal_parameters = named_values(map, fit.p, range(n_nominal));
     res.p = fit.p;
     for (int j = 0; j < map.size(); ++j) res.labels.push_back(map.label(j));
     if (cand.id == "marker_offset" || cand.id == "sync_lag" || cand.id == "registration")
@@ -589,7 +580,31 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                         : fmt::format("; held-out ‖r‖² {:.4g} → {:.4g} mm² (needs a drop > "
                                       "{:.3g})",
                                       before * 1e6, after * 1e6, res.heldout_threshold * 1e6)));
-    d.refits.push_back(res);
+    return res;
+  };
+  for (int r = 0; r < K && !stopped(); ++r) {
+    const int c = order[r];
+    const CandidateScore& score = start_scores.count(c) ? start_scores.at(c) : marginal.at(c);
+    d.refits.push_back(refit(c, [&](Model& model, const std::vector<int>& entries) {
+      const ParameterMap& map = model.problem->map();
+      if (probe_start.count(c)) return Eigen::VectorXd(probe_start.at(c));
+      // The joint Gauss–Newton step of screening: the effect and the nominal
+      // parameters that compensated for its absence (a clock lag fitted as viscosity).
+      Eigen::VectorXd p0 = map.initial();
+      p0.head(n_nominal) = p_nominal;
+      if (score.fitted_step.size() == n_nominal) p0.head(n_nominal) += score.fitted_step;
+      if (d.candidates[c].id == "anisotropy") {
+        if (score.step.size() == 1) p0[entries[0]] = score.step[0];
+      } else if (entries.size() == groups[c].second.size()) {
+        for (std::size_t a = 0; a < score.active.size(); ++a) {
+          const long k =
+              std::find(groups[c].second.begin(), groups[c].second.end(), score.active[a]) -
+              groups[c].second.begin();
+          p0[entries[k]] += score.step[a];
+        }
+      }
+      return p0;
+    }));
   }
   d.seconds.refits = since(t0);
 
@@ -605,6 +620,48 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     const RefitResult& y = d.refits[d.accepted];
     if (judged_on_heldout ? x.heldout_drop > y.heldout_drop : x.bic < y.bic) d.accepted = r;
   }
+  // ---- 5. The unnamed effect -----------------------------------------------------
+  // Only when something is missing and no named candidate took it: the missing force
+  // found more than noise, or the nominal residual is above it. ‖r₀‖²/(N − n) over σ̂²
+  // is an F ratio on N − n and M degrees of freedom (M third differences), whose
+  // logarithm is about normal with variance 2/(N − n) + 2/M.
+  const double residual_dof = std::max(1.0, N - n_nominal);
+  const double log_ratio = std::log(d.nominal_train.sum_sq / residual_dof / sigma2);
+  const bool above_noise =
+      log_ratio > normal_quantile(d.settings.alpha) *
+                      std::sqrt(2 / residual_dof + 2.0 / std::max(1, d.noise.differences));
+  const bool something_missing =
+      above_noise || (d.missing_force.ok && d.missing_force.statistic > d.missing_force.threshold);
+  if (d.accepted < 0 && d.settings.learned_correction && something_missing && !stopped()) {
+    t0 = Clock::now();
+    say(fmt::format(
+        "stage 5: no named candidate explains the gap (nominal ‖r‖² {:.2f}× the noise's): "
+        "a learned stress correction",
+        std::exp(log_ratio)));
+    d.candidates.push_back(learned_correction(nominal));
+    const int c = static_cast<int>(d.candidates.size()) - 1;
+    // From the Gauss–Newton step at the nominal fit: the correction is linear in its
+    // values, and L-BFGS from zero crawls along their weakly coupled directions (12
+    // evaluations took a bulk-modulus error a tenth of the way). The minimum-norm
+    // step leaves the values the data do not see at 0.
+    RefitResult res = refit(c, [&](Model& model, const std::vector<int>&) {
+      Eigen::VectorXd p0 = model.problem->map().initial();
+      p0.head(n_nominal) = p_nominal;
+      if (o.resume && fs::exists(state / "unnamed.csv")) return p0;  // the refit is saved
+      const GaussNewtonSystem gn = gauss_newton_system(*model.problem, p0, o.interrupt);
+      if (gn.ok) p0 -= gn.jacobian.completeOrthogonalDecomposition().solve(gn.residual);
+      return p0;
+    });
+    if (res.ok) {
+      d.signature = correction_signature(nominal, res.parameters);
+      say("  signature: " + d.signature.summary);
+    }
+    d.refits.push_back(res);
+    d.learned = static_cast<int>(d.refits.size()) - 1;
+    if (res.ok && res.passes_training && (!judged_on_heldout || res.passes_heldout))
+      d.accepted = d.learned;
+    d.seconds.learned_correction = since(t0);
+  }
   if (d.accepted >= 0) {
     const RefitResult& a = d.refits[d.accepted];
     d.effect = d.candidates[a.candidate].id;
@@ -618,8 +675,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       if (worst) where = worst->name;
     }
     if (!where.empty()) d.verdict_where.push_back(where);
-    // Screen again with the accepted effect in the model, at its refit.
-    if (!stopped()) {
+    // Screen again with the accepted effect in the model, at its refit (after the
+    // unnamed one, every named candidate has been refitted and failed already).
+    if (!stopped() && d.accepted != d.learned) {
       t0 = Clock::now();
       say(fmt::format("stage 4: screening again with {} in the model", d.effect));
       std::vector<const Candidate*> with = {&d.candidates[a.candidate]};
@@ -667,6 +725,20 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         say(fmt::format("  the second screening failed: {}", g2.error));
       }
       d.seconds.second_screening = since(t0);
+    }
+    // How far it shrinks, as a force: the missing force of the model with the effect.
+    if (d.settings.missing_force.enabled && mfs.knots_per_second > 0 && !stopped()) {
+      const auto tf = Clock::now();
+      say(fmt::format("stage 4: the missing force left with {} in the model", d.effect));
+      const RefitResult& x = d.refits[d.accepted];
+      Model with = load_model(d.scenario, nominal, {&d.candidates[x.candidate]}, false,
+                              (models / "accepted.yaml").string());
+      d.remaining_force =
+          fit_missing_force(*with.problem, *with.scenario, x.p, axis, d.noise.sigma, mfs,
+                            (out / "missing-force-after").string(), o.interrupt, o.progress);
+      judge(d.remaining_force, d.nominal_train.samples, d.noise.sigma, d.settings.alpha);
+      say("  missing force left: " + describe(d.remaining_force));
+      d.seconds.missing_force += since(tf);
     }
   } else {
     // The nominal model is the answer: its fitted scenario is the one to run.

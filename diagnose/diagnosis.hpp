@@ -10,6 +10,9 @@
 ///     ones refitted with the nominal parameters free and checked on held-out motions.
 ///  4. How far: training and held-out RMS before and after, the effect's parameters
 ///     with standard errors.
+///  5. When no named candidate is accepted but the nominal model leaves more than
+///     noise: a learned stress correction (diagnose/learned_correction), judged like
+///     a candidate and named `unnamed` when it passes.
 /// An effect is named when its refit clears a likelihood-ratio test against the
 /// estimated noise on the training data and, when held-out motions are given, lowers
 /// their misfit by more than the noise can explain; otherwise the verdict is `none`.
@@ -21,17 +24,14 @@
 
 #include "diagnose/candidates.hpp"
 #include "diagnose/diagnose_settings.hpp"
+#include "diagnose/learned_correction.hpp"
 #include "diagnose/missing_force.hpp"
+#include "diagnose/named_value.hpp"
 #include "diagnose/noise.hpp"
 #include "diagnose/ranking.hpp"
 #include "diagnose/where.hpp"
 
 namespace kelvin {
-
-struct NamedValue {
-  std::string name;
-  double value = 0, std_error = NAN;  // model units
-};
 
 /// Misfit of one model on one set of experiments at the capture frames.
 struct MisfitFigures {
@@ -40,11 +40,13 @@ struct MisfitFigures {
   double rms = 0;     // per coordinate (m)
   double sum_sq = 0;  // ‖r‖² (m²)
   int samples = 0;
-  Eigen::VectorXd residual;  // for comparisons between models on the same samples
+  Eigen::VectorXd residual;             // for comparisons between models on the same samples
+  std::vector<ResidualSample> entries;  // of residual: experiment, marker, axis, frame
 };
 
 struct HeldOutFigures {
   std::string path;
+  std::vector<std::string> marker_names;  // of its objective (ResidualSample::marker)
   MisfitFigures before, after;
 };
 
@@ -65,6 +67,9 @@ struct RefitResult {
   bool passes_training = false, passes_heldout = false;
   std::string where;  // marker, or region of a field's largest change
   std::vector<NamedValue> parameters;
+  /// The nominal parameters as refitted with the effect: what they had absorbed
+  /// (a clock lag fitted as viscosity; a learned correction traded against μ).
+  std::vector<NamedValue> nominal_parameters;
   std::string fitted_yaml;          // the refitted scenario, runnable by `kelvin simulate`
   Eigen::VectorXd p;                // refitted parameters (optimiser space)
   std::vector<std::string> labels;  // of p
@@ -72,7 +77,7 @@ struct RefitResult {
 
 struct StageTimes {
   double nominal_fit = 0, missing_force = 0, screening = 0, refits = 0, heldout = 0,
-         second_screening = 0;
+         second_screening = 0, learned_correction = 0;
 };
 
 struct Diagnosis {
@@ -97,10 +102,18 @@ struct Diagnosis {
   std::string effect = "none";
   std::vector<std::string> verdict_where;
   int accepted = -1;  // index into refits
+  /// The learned correction's refit (index into refits; -1 when not run: a named
+  /// effect was accepted, or the missing force found nothing beyond noise), and its
+  /// signature in strain and rate.
+  int learned = -1;
+  CorrectionSignature signature;
   /// Screening again with the accepted effect in the model (at its refit): the
   /// first significant candidate there is a second effect.
   Ranking second_ranking;
   int second_candidate = -1;
+  /// The missing force of the accepted model at its refit: what the effect leaves
+  /// unexplained (ok false when not run).
+  MissingForce remaining_force;
   std::string fitted_yaml;  // of the accepted model (the nominal one when none)
   bool interrupted = false;
   StageTimes seconds;

@@ -65,6 +65,38 @@ double heldout_rms(const std::vector<HeldOutFigures>& h, bool after) {
   return n ? std::sqrt(sq / n) : NAN;
 }
 
+/// A missing-force field's figures as a JSON object ({"error": …} when not found).
+std::string missing_force_json(const MissingForce& f, bool asked) {
+  std::string j;
+  auto out = std::back_inserter(j);
+  if (!f.ok) {
+    fmt::format_to(out, "{{\"error\": {}}}", json_string(asked ? f.error : "not asked for"));
+    return j;
+  }
+  fmt::format_to(out,
+                 "{{\"where\": {}, \"peak_time\": {}, \"knots\": {}, \"segments\": {}, "
+                 "\"evaluations\": {}, \"train_rms_before\": {}, \"train_rms_after\": {}, "
+                 "\"statistic\": {}, \"threshold\": {}, \"dof\": {}, \"files\": {}, "
+                 "\"regions\": [",
+                 json_string(f.where), json_number(f.peak_time), f.knots, f.segments, f.evaluations,
+                 json_number(f.rms_before), json_number(f.rms_after), json_number(f.statistic),
+                 json_number(f.threshold), f.dof, json_strings(f.files));
+  for (std::size_t k = 0; k < f.regions.size(); ++k)
+    fmt::format_to(out, "{}{{\"name\": {}, \"rms_force\": {}, \"share\": {}}}", k ? ", " : "",
+                   json_string(f.regions[k].name), json_number(f.regions[k].rms_force),
+                   json_number(f.regions[k].share));
+  j += "]}";
+  return j;
+}
+
+/// The field's share per region as a Markdown table.
+std::string region_table(const MissingForce& f) {
+  std::string r = "| region | RMS force density (N/m³) | share of ∫∫\\|f\\|² |\n|---|---:|---:|\n";
+  for (const auto& g : f.regions)
+    r += fmt::format("| {} | {:.4g} | {:.1f} % |\n", g.name, g.rms_force, 100 * g.share);
+  return r;
+}
+
 std::string diagnosis_json(const Diagnosis& d) {
   std::string j = "{\n";
   auto out = std::back_inserter(j);
@@ -114,26 +146,8 @@ std::string diagnosis_json(const Diagnosis& d) {
                    k ? ", " : "", json_string(d.where.regions[k].name),
                    json_number(d.where.regions[k].rms), json_number(d.where.regions[k].excess),
                    json_strings(d.where.regions[k].markers));
-  j += "],\n    \"missing_force\": ";
-  if (const MissingForce& f = d.missing_force; f.ok) {
-    fmt::format_to(out,
-                   "{{\"where\": {}, \"peak_time\": {}, \"knots\": {}, \"segments\": {}, "
-                   "\"evaluations\": {}, \"train_rms_before\": {}, \"train_rms_after\": {}, "
-                   "\"statistic\": {}, \"threshold\": {}, \"dof\": {}, \"files\": {}, "
-                   "\"regions\": [",
-                   json_string(f.where), json_number(f.peak_time), f.knots, f.segments,
-                   f.evaluations, json_number(f.rms_before), json_number(f.rms_after),
-                   json_number(f.statistic), json_number(f.threshold), f.dof,
-                   json_strings(f.files));
-    for (std::size_t k = 0; k < f.regions.size(); ++k)
-      fmt::format_to(out, "{}{{\"name\": {}, \"rms_force\": {}, \"share\": {}}}", k ? ", " : "",
-                     json_string(f.regions[k].name), json_number(f.regions[k].rms_force),
-                     json_number(f.regions[k].share));
-    j += "]}";
-  } else {
-    fmt::format_to(out, "{{\"error\": {}}}",
-                   json_string(d.settings.missing_force.enabled ? f.error : "not asked for"));
-  }
+  j += "],\n    \"missing_force\": " +
+       missing_force_json(d.missing_force, d.settings.missing_force.enabled);
   j += "\n  },\n";
   // Screening.
   fmt::format_to(out, "  \"screening\": {{\"alpha\": {}, \"ranking\": [",
@@ -179,32 +193,122 @@ std::string diagnosis_json(const Diagnosis& d) {
   j += "],\n  \"refits\": [";
   for (std::size_t k = 0; k < d.refits.size(); ++k) {
     const RefitResult& r = d.refits[k];
-    fmt::format_to(out,
-                   "{}\n    {{\"candidate\": {}, \"ok\": {}, \"error\": {}, \"evaluations\": {}, "
-                   "\"train_rms_before\": {}, \"train_rms_after\": {}, \"statistic\": {}, "
-                   "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
-                   "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
-                   "\"passes_training\": {}, \"passes_heldout\": {}, \"where\": {}, "
-                   "\"parameters\": {}, \"fitted\": {}}}",
-                   k ? "," : "", json_string(candidate_name(d, r.candidate)),
-                   r.ok ? "true" : "false", json_string(r.error), r.evaluations,
-                   json_number(d.nominal_train.rms), json_number(r.train.rms),
-                   json_number(r.statistic), json_number(r.threshold), r.dof, json_number(r.bic),
-                   json_number(heldout_rms(r.heldout, false)),
-                   json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
-                   json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
-                   r.passes_heldout ? "true" : "false", json_string(r.where),
-                   json_values(r.parameters), json_string(r.fitted_yaml));
+    fmt::format_to(
+        out,
+        "{}\n    {{\"candidate\": {}, \"ok\": {}, \"error\": {}, \"evaluations\": {}, "
+        "\"train_rms_before\": {}, \"train_rms_after\": {}, \"statistic\": {}, "
+        "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
+        "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
+        "\"passes_training\": {}, \"passes_heldout\": {}, \"where\": {}, "
+        "\"parameters\": {}, \"nominal_parameters\": {}, \"fitted\": {}}}",
+        k ? "," : "", json_string(candidate_name(d, r.candidate)), r.ok ? "true" : "false",
+        json_string(r.error), r.evaluations, json_number(d.nominal_train.rms),
+        json_number(r.train.rms), json_number(r.statistic), json_number(r.threshold), r.dof,
+        json_number(r.bic), json_number(heldout_rms(r.heldout, false)),
+        json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
+        json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
+        r.passes_heldout ? "true" : "false", json_string(r.where), json_values(r.parameters),
+        json_values(r.nominal_parameters), json_string(r.fitted_yaml));
   }
+  j += "],\n  \"learned_correction\": ";
+  if (d.learned < 0) {
+    j += "null";
+  } else {
+    fmt::format_to(out, "{{\"refit\": {}, \"summary\": {}, \"signature\": [", d.learned,
+                   json_string(d.signature.summary));
+    for (std::size_t k = 0; k < d.signature.points.size(); ++k) {
+      const SignaturePoint& p = d.signature.points[k];
+      fmt::format_to(out, "{}{{\"kind\": {}, \"at\": {}, \"value\": {}, \"relative\": {}}}",
+                     k ? ", " : "", json_string(p.kind), json_number(p.at), json_number(p.value),
+                     json_number(p.relative));
+    }
+    j += "]}";
+  }
+  j += ",\n  \"remaining_force\": " +
+       missing_force_json(d.remaining_force, d.settings.missing_force.enabled && d.accepted >= 0);
   fmt::format_to(out,
-                 "],\n  \"seconds\": {{\"nominal_fit\": {}, \"missing_force\": {}, "
+                 ",\n  \"seconds\": {{\"nominal_fit\": {}, \"missing_force\": {}, "
                  "\"screening\": {}, \"refits\": {}, \"heldout\": {}, \"second_screening\": "
-                 "{}}},\n  \"fitted\": {}\n}}\n",
+                 "{}, \"learned_correction\": {}}},\n  \"fitted\": {}\n}}\n",
                  json_number(d.seconds.nominal_fit), json_number(d.seconds.missing_force),
                  json_number(d.seconds.screening), json_number(d.seconds.refits),
                  json_number(d.seconds.heldout), json_number(d.seconds.second_screening),
-                 json_string(d.fitted_yaml));
+                 json_number(d.seconds.learned_correction), json_string(d.fitted_yaml));
   return j;
+}
+
+/// Squared distance |simulated − observed|² per (marker, frame) of experiment 0.
+using Distances = std::map<std::pair<int, double>, double>;
+Distances marker_distances(const Eigen::VectorXd& residual,
+                           const std::vector<ResidualSample>& samples) {
+  Distances sq;
+  for (std::size_t k = 0; k < samples.size() && k < static_cast<std::size_t>(residual.size());
+       ++k) {
+    const auto& s = samples[k];
+    if (s.experiment != 0) continue;
+    const double r = residual[static_cast<long>(k)] / s.sqrt_weight;
+    sq[{s.marker, s.t}] += r * r;
+  }
+  return sq;
+}
+
+/// The distance noise alone gives (σ̂√3: three coordinates), over [t0, t1].
+svg::Series noise_line(const Diagnosis& d, double t0, double t1) {
+  svg::Series noise;
+  noise.name = "noise σ√3";
+  noise.colour = "#000000";
+  noise.dashed = true;
+  noise.x = {t0, t1};
+  noise.y = {1e3 * d.noise.sigma * std::sqrt(3.0), 1e3 * d.noise.sigma * std::sqrt(3.0)};
+  return noise;
+}
+
+/// One marker's distance over time, in mm.
+svg::Series distance_series(const Distances& sq, int marker) {
+  svg::Series s;
+  for (const auto& [key, v] : sq)
+    if (key.first == marker) {
+      s.x.push_back(key.second);
+      s.y.push_back(1e3 * std::sqrt(v));
+    }
+  return s;
+}
+
+/// The held-out motion's worst markers (by the nominal's misfit), their distance
+/// over time before and after the accepted effect; empty without one.
+std::string heldout_plot(const Diagnosis& d) {
+  if (d.accepted < 0) return {};
+  const RefitResult& a = d.refits[d.accepted];
+  if (a.heldout.empty() || !a.heldout[0].after.ok ||
+      a.heldout[0].after.samples != a.heldout[0].before.samples)
+    return {};
+  const HeldOutFigures& h = a.heldout[0];
+  const Distances before = marker_distances(h.before.residual, h.before.entries),
+                  after = marker_distances(h.after.residual, h.after.entries);
+  std::map<int, double> misfit;
+  for (const auto& [key, v] : before) misfit[key.first] += v;
+  std::vector<std::pair<double, int>> worst;
+  for (const auto& [marker, v] : misfit) worst.push_back({-v, marker});
+  std::sort(worst.begin(), worst.end());
+  svg::Figure fig;
+  fig.title = fmt::format("Held-out motion {}: the worst markers without and with {}",
+                          fs::path(h.path).filename().string(), d.effect);
+  for (std::size_t k = 0; k < worst.size() && k < 3; ++k) {
+    const int marker = worst[k].second;
+    svg::Plot plot;
+    plot.title = marker < static_cast<int>(h.marker_names.size()) ? h.marker_names[marker] : "";
+    plot.x_label = "t (s)";
+    plot.y_label = "|simulated − observed| (mm)";
+    svg::Series b = distance_series(before, marker), x = distance_series(after, marker);
+    b.name = "nominal";
+    b.colour = "#7f7f7f";
+    x.name = "with " + d.effect;
+    x.colour = "#d62728";
+    plot.series = {b, x};
+    if (!b.x.empty()) plot.series.push_back(noise_line(d, b.x.front(), b.x.back()));
+    fig.panels.push_back(plot);
+  }
+  return svg::render(fig);
 }
 
 /// Residual distance per marker over time (nominal fit, training motion 0).
@@ -216,33 +320,16 @@ std::string residual_plot(const Diagnosis& d) {
   plot.y_label = "|simulated − observed| (mm)";
   const std::vector<std::string> colours = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728",
                                             "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"};
-  std::map<std::pair<int, double>, double> sq;
-  for (std::size_t k = 0; k < d.nominal_samples.size(); ++k) {
-    const auto& s = d.nominal_samples[k];
-    if (s.experiment != 0) continue;
-    const double r = d.nominal_train.residual[static_cast<long>(k)] / s.sqrt_weight;
-    sq[{s.marker, s.t}] += r * r;
-  }
+  const auto distance = marker_distances(d.nominal_train.residual, d.nominal_samples);
   for (std::size_t i = 0; i < d.marker_names.size(); ++i) {
-    svg::Series s;
+    svg::Series s = distance_series(distance, static_cast<int>(i));
     s.name = d.marker_names[i];
     s.colour = colours[i % colours.size()];
-    for (const auto& [key, v] : sq)
-      if (key.first == static_cast<int>(i)) {
-        s.x.push_back(key.second);
-        s.y.push_back(1e3 * std::sqrt(v));
-      }
     plot.series.push_back(s);
   }
-  svg::Series noise;
-  noise.name = "noise σ√3";
-  noise.colour = "#000000";
-  noise.dashed = true;
-  if (!sq.empty()) {
-    noise.x = {sq.begin()->first.second, sq.rbegin()->first.second};
-    noise.y = {1e3 * d.noise.sigma * std::sqrt(3.0), 1e3 * d.noise.sigma * std::sqrt(3.0)};
-  }
-  plot.series.push_back(noise);
+  if (!distance.empty())
+    plot.series.push_back(
+        noise_line(d, distance.begin()->first.second, distance.rbegin()->first.second));
   fig.panels.push_back(plot);
   return svg::render(fig);
 }
@@ -310,7 +397,8 @@ std::string missing_force_plot(const MissingForce& f) {
   return svg::render(plot);
 }
 
-std::string report(const Diagnosis& d) {
+/// `heldout_figure`: heldout.svg was written.
+std::string report(const Diagnosis& d, bool heldout_figure) {
   std::string r;
   auto out = std::back_inserter(r);
   fmt::format_to(out, "# Diagnosis of {}\n\n", d.scenario);
@@ -343,6 +431,15 @@ std::string report(const Diagnosis& d) {
                      d.second_ranking.order[0].threshold);
     else if (!d.second_ranking.order.empty())
       r += "Screened again with it in the model, no further candidate is significant.\n\n";
+    if (const MissingForce& f = d.remaining_force; f.ok)
+      fmt::format_to(
+          out,
+          "The missing force left with it in the model takes the training RMS from "
+          "{:.4f} to {:.4f} mm (likelihood ratio {:.1f} against {:.1f}: {}); most of "
+          "it in the {} (`missing-force-after/body-force.pvd`).\n\n{}\n",
+          f.rms_before * 1e3, f.rms_after * 1e3, f.statistic, f.threshold,
+          f.statistic > f.threshold ? "something is still missing" : "what is left is noise",
+          f.where, region_table(f));
   }
   fmt::format_to(out,
                  "## Nominal fit\n\n{} evaluations; training RMS {:.4f} mm per coordinate "
@@ -386,14 +483,12 @@ std::string report(const Diagnosis& d) {
         "**{}**, largest at t = {:.3g} s. ParaView: `missing-force/body-force.pvd` (force density "
         "per "
         "element and knot; `body-force.csv` the same as a table).\n\n"
-        "![missing force per region](missing-force.svg)\n\n"
-        "| region | RMS force density (N/m³) | share of ∫∫\\|f\\|² |\n|---|---:|---:|\n",
+        "![missing force per region](missing-force.svg)\n\n",
         f.knots, f.segments, f.evaluations, f.rms_before * 1e3, f.rms_after * 1e3, f.statistic,
         f.threshold, f.dof,
         f.statistic > f.threshold ? "" : ": this field is noise, its place means nothing", f.where,
         f.peak_time);
-    for (const auto& g : f.regions)
-      fmt::format_to(out, "| {} | {:.4g} | {:.1f} % |\n", g.name, g.rms_force, 100 * g.share);
+    r += region_table(f);
   } else if (d.settings.missing_force.enabled && !d.missing_force.error.empty()) {
     r += "\n### Missing force\n\nNot found: " + d.missing_force.error + "\n";
   }
@@ -445,14 +540,48 @@ std::string report(const Diagnosis& d) {
                        : fmt::format("{:.2f}", x.heldout_drop / x.heldout_threshold),
                    x.where, params);
   }
+  if (d.learned >= 0) {
+    const RefitResult& x = d.refits[d.learned];
+    r += "\n### Learned correction (unnamed)\n\nNo named candidate passed, and the nominal "
+         "model leaves more than noise: a correction of the stress (a principal-stretch spline, "
+         "zero at rest, and a viscosity growing with the largest stretch) was fitted with the "
+         "nominal parameters free.";
+    if (x.ok)
+      fmt::format_to(out,
+                     " It takes the training RMS from {:.4f} to {:.4f} mm{}. Signature: {}.\n\n"
+                     "| correction | at | value | relative |\n|---|---:|---:|---:|\n",
+                     d.nominal_train.rms * 1e3, x.train.rms * 1e3,
+                     d.accepted == d.learned ? " and passes the tests below"
+                                             : ", not enough to pass the tests below",
+                     d.signature.summary);
+    else
+      r += " It failed: " + x.error + "\n";
+    for (const SignaturePoint& p : d.signature.points)
+      fmt::format_to(out, "| {} | {:.3g} | {:.4g} {} | {:+.1f} % |\n",
+                     p.kind == "stretch"  ? "f′(s), principal stretch"
+                     : p.kind == "volume" ? "h′(J), volume ratio"
+                                          : "extra viscosity at largest stretch",
+                     p.at, p.value, p.kind == "damping" ? "Pa s" : "Pa", 100 * p.relative);
+    r += "\nRelative: an elastic value over M·|s − 1| (M the nominal's largest modulus), the "
+         "viscosity over the nominal's. The nominal parameters were refitted with it, and the "
+         "correction and their change together are the change of the law:";
+    for (std::size_t k = 0; k < x.nominal_parameters.size() && k < d.nominal_parameters.size(); ++k)
+      fmt::format_to(out, "{} {} {:.4g} → {:.4g}", k ? "," : "", x.nominal_parameters[k].name,
+                     d.nominal_parameters[k].value, x.nominal_parameters[k].value);
+    r += ".\n";
+  }
+  if (heldout_figure)
+    r += "\n![held-out motion: the worst markers without and with the effect](heldout.svg)\n";
   r += "\nAn effect is named when its refit's likelihood-ratio statistic (the drop of ‖r‖² "
        "over σ̂²) clears the χ² threshold and, with held-out motions, their ‖r‖² drops by "
        "more than 2 z σ̂ ‖Δh‖ (what fitting noise alone could give, z at the same α).\n";
   fmt::format_to(out,
                  "\nStage times: nominal fit {:.0f} s, missing force {:.0f} s, screening {:.0f} s, "
-                 "refits {:.0f} s (held-out checks {:.0f} s), second screening {:.0f} s.\n",
+                 "refits {:.0f} s (held-out checks {:.0f} s), second screening {:.0f} s, "
+                 "learned correction {:.0f} s.\n",
                  d.seconds.nominal_fit, d.seconds.missing_force, d.seconds.screening,
-                 d.seconds.refits, d.seconds.heldout, d.seconds.second_screening);
+                 d.seconds.refits, d.seconds.heldout, d.seconds.second_screening,
+                 d.seconds.learned_correction);
   return r;
 }
 
@@ -469,6 +598,8 @@ std::string write_diagnosis_outputs(const Diagnosis& d) {
   }
   if (d.missing_force.ok)
     write_file_atomic((dir / "missing-force.svg").string(), missing_force_plot(d.missing_force));
+  const std::string heldout = heldout_plot(d);
+  if (!heldout.empty()) write_file_atomic((dir / "heldout.svg").string(), heldout);
   std::string csv = "marker,region,along,rms_x,rms_y,rms_z,rms,excess,gain,delay\n";
   for (const auto& m : d.where.markers)
     csv += fmt::format("{},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g}\n", m.name,
@@ -489,7 +620,7 @@ std::string write_diagnosis_outputs(const Diagnosis& d) {
     }
   }
   const std::string path = (dir / "report.md").string();
-  write_file_atomic(path, report(d));
+  write_file_atomic(path, report(d, !heldout.empty()));
   return path;
 }
 

@@ -35,8 +35,8 @@ struct MissingForce {
   /// freedom as the field has values: below it, the field fits noise (set by the caller).
   double statistic = 0, threshold = 0;
   int dof = 0;
-  double peak_time = 0;                  // the knot where ∫ |f|² dV is largest (s)
-  std::string where;                     // the region with the largest share
+  double peak_time = 0;  // the knot where ∫ |f|² dV is largest (s)
+  std::string where;     // the region with the largest share
   std::vector<MissingForceRegion> regions;
   std::vector<std::string> files;  // in the output directory
 };

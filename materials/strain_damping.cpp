@@ -8,7 +8,8 @@ namespace kelvin {
 
 const std::vector<ParamInfo>& StrainDamping::params() const {
   static const std::vector<ParamInfo> p = {
-      {"d0", "Pa s", "viscosity at rest (σ_max = 1)", 1.0, 0, 1e300, true},
+      // 0 is admissible: as a correction added to another viscous term it starts at 0.
+      {"d0", "Pa s", "viscosity at rest (σ_max = 1)", 1.0, 0, 1e300, false},
       {"d1", "Pa s", "linear growth of the viscosity with σ_max − 1", 0.0, -1e300, 1e300, false},
       {"d2", "Pa s", "quadratic growth of the viscosity with σ_max − 1", 0.0, -1e300, 1e300, false},
   };

@@ -14,6 +14,7 @@
 #include "diagnose/diagnosis.hpp"
 #include "diagnose/diagnosis_outputs.hpp"
 #include "diagnose/extended_scenario.hpp"
+#include "diagnose/learned_correction.hpp"
 #include "diagnose/noise.hpp"
 #include "engine/csv.hpp"
 #include "engine/error.hpp"
@@ -82,8 +83,19 @@ TEST(DiagnoseSettings, BadEntriesAreRefusedWithTheirPlace) {
   EXPECT_EQ(d.refits, 3);
   EXPECT_TRUE(d.candidates.empty());
   EXPECT_TRUE(d.missing_force.enabled);
+  EXPECT_TRUE(d.learned_correction);
   test::write_text(dir / "off.yaml", "name: s\ndiagnose:\n  missing_force: false\n");
   EXPECT_FALSE(load_diagnose_settings((dir / "off.yaml").string()).missing_force.enabled);
+  // The learned correction is a fallback, not a candidate to screen: a list switches
+  // it off unless it names it, and cannot name it alone.
+  EXPECT_NE(refusal("  candidates: [unnamed]\n").find("names no candidate to screen"),
+            std::string::npos);
+  test::write_text(dir / "list.yaml", "name: s\ndiagnose:\n  candidates: [drag]\n");
+  EXPECT_FALSE(load_diagnose_settings((dir / "list.yaml").string()).learned_correction);
+  test::write_text(dir / "with.yaml", "name: s\ndiagnose:\n  candidates: [drag, unnamed]\n");
+  const DiagnoseSettings w = load_diagnose_settings((dir / "with.yaml").string());
+  EXPECT_TRUE(w.learned_correction);
+  EXPECT_EQ(w.candidates, std::vector<std::string>{"drag"});
 }
 
 const std::string kNominal = R"(  density: 1100
@@ -156,16 +168,66 @@ TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
   EXPECT_EQ(extended.material.viscous[0].model, "power-law");
   FitProblem wide(extended, extended.fit.parameters);
   for (int j = 0; j < plain.map().size(); ++j) EXPECT_EQ(wide.map().label(j), plain.map().label(j));
-  const Evaluation e = wide.evaluate(wide.map().initial(), {});
+  const Evaluation e = wide.evaluate(wide.map().initial(), phi_only);
   ASSERT_TRUE(e.ok) << e.error;
   // Equal to the integration error (rtol 1e-7): the extra terms change the Newton
   // iterations' round-off, not the model.
   EXPECT_NEAR(e.phi, base.phi, 1e-6 * base.phi);
 }
 
+// The learned correction is nested at zero, and its signature reads the refitted
+// values as stress relative to the nominal's modulus.
+TEST(LearnedCorrection, AtZeroChangesNothingAndItsSignatureReadsTheValues) {
+  const fs::path dir = test::scratch("diagnosis-learned");
+  const std::string truth =
+      test::simulate_tracks(dir, "truth", bar(kNominal, test::kShakenBarMarkers));
+  test::write_text(dir / "nominal.yaml",
+                   bar(kNominal, test::kShakenBarMarkers + "\n  observed: " + truth +
+                                     "\nfit:\n  parameters: [elastic.mu, viscous.nu]\n"));
+  const Scenario nominal = load_scenario((dir / "nominal.yaml").string());
+  const Candidate c = learned_correction(nominal);
+  EXPECT_EQ(c.id, "unnamed");
+  const ExtendedScenario ext =
+      write_extended_scenario(nominal.path, nominal, {&c}, false, (dir / "unnamed.yaml").string());
+  const Scenario extended = load_scenario(ext.path);
+  ASSERT_EQ(extended.material.elastic.size(), 2u);
+  EXPECT_EQ(extended.material.elastic[1].model, "spline");
+  EXPECT_EQ(extended.material.viscous[1].model, "strain-damping");
+  // Four stretch and four volume knots within ±20 % of rest, d1 and d2 (the nominal
+  // Newtonian term carries d0).
+  ASSERT_EQ(ext.candidate_specs.size(), 1u);
+  EXPECT_EQ(ext.candidate_specs[0].size(), 10u);
+  GradientOptions phi_only;
+  phi_only.method = GradientMethod::kNone;
+  FitProblem plain(nominal, nominal.fit.parameters), wide(extended, extended.fit.parameters);
+  const Evaluation a = plain.evaluate(plain.map().initial(), phi_only),
+                   b = wide.evaluate(wide.map().initial(), phi_only);
+  ASSERT_TRUE(a.ok && b.ok) << a.error << b.error;
+  EXPECT_NEAR(b.phi, a.phi, 1e-6 * a.phi + 1e-18);
+
+  // M = λ = 2e5 Pa: f′(1.1) = 2000 Pa is +10 % of M·0.1 (stiffer in stretch), h′(0.9) =
+  // 4000 Pa is −20 % (a positive stress in compression: softer); ν = 30 Pa s.
+  const CorrectionSignature sig = correction_signature(
+      nominal, {{"elastic[1].f11", 2000}, {"elastic[1].h12", 4000}, {"viscous[1].d1", 30}});
+  ASSERT_EQ(sig.points.size(), 4u);
+  EXPECT_EQ(sig.points[0].kind, "stretch");
+  EXPECT_DOUBLE_EQ(sig.points[0].at, 1.1);
+  EXPECT_NEAR(sig.points[0].relative, 0.1, 1e-12);
+  EXPECT_EQ(sig.points[1].kind, "volume");
+  EXPECT_DOUBLE_EQ(sig.points[1].at, 0.9);
+  EXPECT_NEAR(sig.points[1].relative, 0.2, 1e-12);
+  // ν(1.2) − ν(1) = d1 · 0.2 = 6 Pa s, a fifth of the nominal's 30.
+  EXPECT_EQ(sig.points[3].kind, "damping");
+  EXPECT_NEAR(sig.points[3].relative, 0.2, 1e-12);
+  EXPECT_NE(sig.summary.find("s > 1: stiffer"), std::string::npos) << sig.summary;
+  EXPECT_NE(sig.summary.find("J < 1: softer"), std::string::npos) << sig.summary;
+}
+
 /// A diagnosis scenario for the shaken bar whose tracks came from `truth` (with
 /// noise), a held-out motion of the same bar at other frequencies.
-fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned seed) {
+fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned seed,
+                        const std::string& candidates = "stiffening, drag, sync_lag, marker_offset",
+                        const std::string& more = "") {
   const std::string train = test::noisy_tracks(
       test::simulate_tracks(dir, "truth-train", bar(truth, test::kShakenBarMarkers)),
       dir / "train.csv", 1e-5, seed);
@@ -189,9 +251,11 @@ fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned 
   test::write_text(dir / "train.yaml",
                    bar(kNominal, test::kShakenBarMarkers + "\n  observed: " + train +
                                      "\nfit:\n  parameters: [elastic.mu, viscous.nu]\n"
-                                     "  max_evaluations: 30\ndiagnose:\n  candidates: [stiffening, "
-                                     "drag, sync_lag, marker_offset]\n  refits: 2\n"
-                                     "  validate: [heldout.yaml]\n"));
+                                     "  max_evaluations: 30\ndiagnose:\n  candidates: [" +
+                                     candidates +
+                                     "]\n  refits: 2\n"
+                                     "  validate: [heldout.yaml]\n" +
+                                     more));
   return dir / "train.yaml";
 }
 
@@ -226,9 +290,15 @@ TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
   EXPECT_LT(f.rms_after, 0.3 * f.rms_before);
   EXPECT_EQ(f.where, "free end");
   EXPECT_TRUE(fs::exists(dir / "out" / "missing-force" / "body-force.pvd"));
-  // Screened again with the drag in the model, nothing else is left to explain.
+  // Screened again with the drag in the model, nothing else is left to explain, and
+  // the missing force of the model with it fits no more than noise.
   EXPECT_FALSE(d.second_ranking.order.empty());
   EXPECT_EQ(d.second_candidate, -1);
+  ASSERT_TRUE(d.remaining_force.ok) << d.remaining_force.error;
+  EXPECT_NEAR(d.remaining_force.rms_before, a.train.rms, 1e-3 * a.train.rms);
+  EXPECT_LT(d.remaining_force.statistic, d.remaining_force.threshold);
+  EXPECT_TRUE(fs::exists(dir / "out" / "heldout.svg"));
+  EXPECT_EQ(d.learned, -1);  // a named effect passed: no learned correction
   EXPECT_TRUE(fs::exists(dir / "out" / "diagnosis.json"));
   EXPECT_TRUE(fs::exists(dir / "out" / "report.md"));
   // fitted.yaml is the extended model: it runs and names the drag.
@@ -251,6 +321,43 @@ TEST(Diagnosis, FindsNoEffectWhereThereIsNone) {
   // With nothing missing, the field fits no more than noise would let it.
   ASSERT_TRUE(d.missing_force.ok) << d.missing_force.error;
   EXPECT_LT(d.missing_force.statistic, d.missing_force.threshold);
+  // Nor is the nominal residual above the noise: no learned correction is fitted.
+  EXPECT_EQ(d.learned, -1);
+}
+
+// A bulk modulus three times the nominal's: at these strains no named candidate
+// (drag, a clock offset) can stand in for it, and the fitted μ
+// cannot match both the bar's bending (E) and its shear (μ). The learned correction's
+// volume spline h′(J) can: the gap is named "unnamed", and its signature says the
+// body is stiffer in volume than the model.
+TEST(Diagnosis, ALearnedCorrectionTakesAGapNoNamedCandidateExplains) {
+  const fs::path dir = test::scratch("diagnosis-unnamed");
+  const std::string truth = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 6.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 20 })";
+  // Without the missing force (its own tests are above): the nominal residual's F
+  // test against the noise is what calls for the correction.
+  const fs::path scenario =
+      diagnosis_case(dir, truth, 13, "drag, sync_lag, unnamed", "  missing_force: false\n");
+  const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), {});
+  write_diagnosis_outputs(d);
+  ASSERT_GE(d.learned, 0);
+  const RefitResult& x = d.refits[d.learned];
+  ASSERT_TRUE(x.ok) << x.error;
+  EXPECT_EQ(d.effect, "unnamed");
+  // The nominal leaves twice the noise (0.01 mm); the correction brings the
+  // training misfit down to it and halves the held-out one.
+  EXPECT_GT(d.nominal_train.rms, 1.5 * d.noise.sigma);
+  EXPECT_LT(x.train.rms, 1.2 * d.noise.sigma);
+  ASSERT_EQ(x.heldout.size(), 1u);
+  EXPECT_LT(x.heldout[0].after.rms, 0.5 * x.heldout[0].before.rms);
+  double volume_tension = NAN;
+  for (const auto& p : d.signature.points)
+    if (p.kind == "volume" && p.at == 1.1) volume_tension = p.relative;
+  EXPECT_GT(volume_tension, 0) << d.signature.summary;
+  EXPECT_TRUE(fs::exists(dir / "out" / "heldout.svg"));
+  const Scenario fitted = load_scenario((dir / "out" / "fitted.yaml").string());
+  EXPECT_EQ(fitted.material.elastic.back().model, "spline");
 }
 
 }  // namespace
