@@ -440,6 +440,8 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
           f.rms_before * 1e3, f.rms_after * 1e3, f.statistic, f.threshold,
           f.statistic > f.threshold ? "something is still missing" : "what is left is noise",
           f.where, region_table(f));
+    else if (!d.remaining_force.error.empty())
+      r += "The missing force left with it in the model: " + d.remaining_force.error + ".\n\n";
   }
   fmt::format_to(out,
                  "## Nominal fit\n\n{} evaluations; training RMS {:.4f} mm per coordinate "
