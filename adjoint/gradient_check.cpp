@@ -73,11 +73,16 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     const int np = static_cast<int>(p.size());
     const int checked = std::min(np, o.max_parameters);
     rep.finite_difference.resize(checked);
+    // Log entries are relative already; linear ones get a step relative to their value
+    // or, at 0, to their unit (a Legendre coefficient or offset at its nominal 0 took a
+    // step of 1e-15 and differenced integration noise).
+    const Eigen::VectorXd units = problem.map().units();
+    const auto size = [&](int j) {
+      return problem.map().is_log(j) ? 1.0 : std::max(std::abs(p[j]), units[j]);
+    };
     for (int j = 0; j < checked; ++j) {
       Eigen::VectorXd qp = p, qm = p;
-      // Log entries are relative already; linear ones get a step relative to their value.
-      const double h =
-          o.fd_step * (problem.map().is_log(j) ? 1.0 : std::max(std::abs(p[j]), 1e-12));
+      const double h = o.fd_step * size(j);
       qp[j] += h;
       qm[j] -= h;
       rep.finite_difference[j] = (phi(qp) - phi(qm)) / (2 * h);
@@ -90,8 +95,7 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     for (int j = 0; j < np; ++j) rep.direction[j] = normal(rng);
     // Scale so that a unit step changes each entry by about its own size (log
     // entries: a factor e), keeping the Taylor steps meaningful in every unit.
-    for (int j = 0; j < np; ++j)
-      rep.direction[j] *= problem.map().is_log(j) ? 1.0 : std::max(std::abs(p[j]), 1e-12);
+    for (int j = 0; j < np; ++j) rep.direction[j] *= size(j);
     rep.direction /= std::sqrt(static_cast<double>(np));
     rep.directional_adjoint = rep.adjoint.dot(rep.direction);
     if (o.forward) rep.directional_forward = rep.forward.dot(rep.direction);
