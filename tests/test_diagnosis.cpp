@@ -304,7 +304,9 @@ TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
   EXPECT_FALSE(d.second_ranking.order.empty());
   EXPECT_EQ(d.second_candidate, -1);
   ASSERT_TRUE(d.remaining_force.ok) << d.remaining_force.error;
-  EXPECT_NEAR(d.remaining_force.rms_before, a.train.rms, 1e-3 * a.train.rms);
+  // It starts from the refit, not the nominal (0.35 mm): its rms is Φ's time
+  // integral and the refit's the frames', which differ by a few per cent.
+  EXPECT_NEAR(d.remaining_force.rms_before, a.train.rms, 0.1 * a.train.rms);
   EXPECT_LT(d.remaining_force.statistic, d.remaining_force.threshold);
   EXPECT_TRUE(fs::exists(dir / "out" / "heldout.svg"));
   EXPECT_EQ(d.learned, -1);  // a named effect passed: no learned correction
