@@ -65,11 +65,8 @@ struct ClampPads {
 ClampPads nested_pads(const Scenario& s) {
   const Eigen::Vector3d extent =
       s.mesh.nodes.rowwise().maxCoeff() - s.mesh.nodes.rowwise().minCoeff();
-  double modulus = 0;
-  for (const auto& q : material_quantities(s.material))
-    if (q.info.unit == "Pa") modulus = std::max(modulus, std::abs(q.value));
   ClampPads p;
-  p.scale = 0.1 * extent.maxCoeff() / std::max(modulus, 1e-300);
+  p.scale = 0.1 * extent.maxCoeff() / largest_modulus(s);
   p.rigid = 1e-4 * p.scale;
   const auto& times = s.markers.observed.times;
   const double rate =
@@ -79,6 +76,13 @@ ClampPads nested_pads(const Scenario& s) {
 }
 
 }  // namespace
+
+double largest_modulus(const Scenario& s) {
+  double modulus = 0;
+  for (const auto& q : material_quantities(s.material))
+    if (q.info.unit == "Pa") modulus = std::max(modulus, std::abs(q.value));
+  return modulus > 0 ? modulus : 1.0;
+}
 
 BodyAxis body_axis(const Scenario& s) {
   BodyAxis b;

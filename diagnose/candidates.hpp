@@ -49,6 +49,10 @@ struct BodyAxis {
 };
 BodyAxis body_axis(const Scenario& scenario);
 
+/// The nominal material's largest quantity in Pa (1 when it has none): the scale of
+/// the pads' compliance and of the learned correction's stresses.
+double largest_modulus(const Scenario& scenario);
+
 /// Every built-in candidate that applies to `scenario` (a damping law needs a
 /// Newtonian term, a marker offset an observed marker), in a fixed order.
 std::vector<Candidate> builtin_candidates(const Scenario& scenario);

@@ -14,13 +14,6 @@ namespace {
 /// sagging soft body reaches; further knots would only add unidentified values.
 constexpr double kReach = 0.2 + 1e-9;
 
-double largest_modulus(const Scenario& s) {
-  double modulus = 0;
-  for (const auto& q : material_quantities(s.material))
-    if (q.info.unit == "Pa") modulus = std::max(modulus, std::abs(q.value));
-  return modulus > 0 ? modulus : 1.0;
-}
-
 double newtonian_viscosity(const Scenario& s) {
   for (const auto& t : s.material.viscous)
     if (t.model == "newtonian" && t.params.count("nu")) return t.params.at("nu");
