@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -15,6 +16,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
 #include "diagnose/extended_scenario.hpp"
+#include "diagnose/heldout_prediction.hpp"
 #include "diagnose/learned_correction.hpp"
 #include "drivers/fit_loop.hpp"
 #include "drivers/fitted_scenario.hpp"
@@ -242,6 +244,61 @@ std::string slug(const Candidate& c) {
   std::string s = c.id;
   if (!c.where.empty() && c.id == "marker_offset") s += "-" + c.where;
   return s;
+}
+
+/// Fills d.predicted_heldout_drop for the candidates of `order` that clear their
+/// threshold: summed over the held-out motions, from each motion's sensitivity solve
+/// of the screening model at the nominal fit; a probed candidate (its linearised step
+/// is blind to it) from one held-out run at its probe instead. All NaN when a held-out
+/// solve fails.
+void predict_heldout_drops(Diagnosis& d, const std::vector<int>& order,
+                           const std::map<int, CandidateScore>& marginal,
+                           const std::map<int, double>& threshold,
+                           const std::map<int, Eigen::VectorXd>& probe_start,
+                           const std::vector<const Candidate*>& all, const ParameterMap& smap,
+                           const Eigen::VectorXd& p_screen, int n_nominal, const Scenario& nominal,
+                           const fs::path& models, const DiagnoseOptions& o) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<int> passed;
+  for (int c : order)
+    if (marginal.at(c).error.empty() && marginal.at(c).statistic > threshold.at(c))
+      passed.push_back(c);
+  for (int c : passed) d.predicted_heldout_drop[c] = 0;
+  const auto fail = [&](const std::string& why) {
+    if (o.progress) o.progress("  held-out prediction not made: " + why);
+    std::fill(d.predicted_heldout_drop.begin(), d.predicted_heldout_drop.end(), nan);
+  };
+  for (std::size_t k = 0; k < d.settings.validate.size(); ++k) {
+    if (o.interrupt && o.interrupt->load()) return fail("interrupted");
+    const std::string& path = d.settings.validate[k];
+    Model h = load_model(path, nominal, all, true,
+                         (models / fmt::format("heldout{}-screening.yaml", k)).string());
+    const ParameterMap& hmap = h.problem->map();
+    bool same = hmap.size() == smap.size();
+    for (int j = 0; same && j < smap.size(); ++j) same = hmap.label(j) == smap.label(j);
+    if (!same) return fail(path + ": its candidates' parameters differ from the training's");
+    const GaussNewtonSystem g = gauss_newton_system(*h.problem, p_screen, o.interrupt);
+    if (!g.ok) return fail(path + ": " + g.error);
+    const std::vector<int> fitted = range(n_nominal);
+    for (int c : passed) {
+      double drop = predicted_heldout_drop(g.residual, g.jacobian, marginal.at(c), fitted);
+      if (probe_start.count(c)) {
+        const Candidate& cand = d.candidates[c];
+        Model hp =
+            load_model(path, nominal, {&cand}, false,
+                       (models / fmt::format("heldout{}-{}-probe.yaml", k, slug(cand))).string());
+        const MisfitFigures f = misfit(*hp.problem, probe_start.at(c), o.interrupt);
+        drop = f.ok && f.samples == d.nominal_heldout[k].before.samples
+                   ? d.nominal_heldout[k].before.sum_sq - f.sum_sq
+                   : nan;
+      }
+      d.predicted_heldout_drop[c] += drop;
+    }
+  }
+  if (o.progress)
+    for (int c : passed)
+      o.progress(fmt::format("  {:<22} predicted held-out ‖h‖² drop {:.4g} mm²", slug(*all[c]),
+                             d.predicted_heldout_drop[c] * 1e6));
 }
 
 }  // namespace
@@ -489,6 +546,22 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // alone, in case its effect is too far from linear for the local test (a long lag).
   int passing = 0;
   for (const auto& [c, x] : marginal) passing += x.error.empty() && x.statistic > threshold[c];
+  d.predicted_heldout_drop.assign(d.candidates.size(), std::numeric_limits<double>::quiet_NaN());
+  if (passing > d.settings.refits && !d.settings.validate.empty() && !stopped()) {
+    th = Clock::now();
+    say(
+        fmt::format("  {} candidates cleared the threshold and {} are refitted: the held-out "
+                    "motions choose (each one's screening step, predicted there)",
+                    passing, d.settings.refits));
+    predict_heldout_drops(d, order, marginal, threshold, probe_start, all, smap, p_screen,
+                          n_nominal, nominal, models, o);
+    d.seconds.heldout += since(th);
+    std::vector<int> passed, rest;
+    for (int c : order) (std::isfinite(d.predicted_heldout_drop[c]) ? passed : rest).push_back(c);
+    order = order_by_heldout(passed, d.predicted_heldout_drop);
+    order.insert(order.end(), rest.begin(), rest.end());
+    d.refit_order_from_heldout = !passed.empty();
+  }
   const int K =
       std::min<int>({d.settings.refits, static_cast<int>(order.size()), std::max(passing, 1)});
   say(fmt::format("stage 3: refits of the top {} candidates ({} cleared the screening threshold)",

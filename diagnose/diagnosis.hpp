@@ -97,6 +97,11 @@ struct Diagnosis {
   MissingForce missing_force;  // of the nominal model (ok false when not run)
   // Stage 3
   Ranking ranking;
+  /// Per candidate: the held-out ‖h‖² drop its screening step predicts (m², summed
+  /// over the held-out motions; NaN when not predicted). Made when more candidates
+  /// clear their threshold than are refitted; the refit order then follows it.
+  std::vector<double> predicted_heldout_drop;
+  bool refit_order_from_heldout = false;
   std::vector<RefitResult> refits;
   // Verdict
   std::string effect = "none";

@@ -97,6 +97,14 @@ std::string region_table(const MissingForce& f) {
   return r;
 }
 
+/// The predicted held-out drop of candidate c in mm², empty when not predicted.
+std::string heldout_prediction(const Diagnosis& d, int c) {
+  if (c < 0 || c >= static_cast<int>(d.predicted_heldout_drop.size()) ||
+      !std::isfinite(d.predicted_heldout_drop[c]))
+    return "";
+  return fmt::format("{:.4g}", d.predicted_heldout_drop[c] * 1e6);
+}
+
 std::string diagnosis_json(const Diagnosis& d) {
   std::string j = "{\n";
   auto out = std::back_inserter(j);
@@ -154,17 +162,24 @@ std::string diagnosis_json(const Diagnosis& d) {
                  json_number(d.ranking.alpha));
   for (std::size_t k = 0; k < d.ranking.order.size(); ++k) {
     const auto& r = d.ranking.order[k];
-    fmt::format_to(out,
-                   "{}\n    {{\"candidate\": {}, \"dof\": {}, \"statistic\": {}, \"p_value\": {}, "
-                   "\"threshold\": {}, \"predicted_rms\": {}, \"conditional_statistic\": {}, "
-                   "\"significant\": {}{}}}",
-                   k ? "," : "", json_string(candidate_name(d, r.candidate)), r.marginal.dof,
-                   json_number(r.marginal.statistic), json_number(r.marginal.p_value),
-                   json_number(r.threshold), json_number(r.marginal.predicted_rms),
-                   json_number(r.conditional.statistic), r.significant ? "true" : "false",
-                   r.marginal.error.empty() ? "" : ", \"error\": " + json_string(r.marginal.error));
+    fmt::format_to(
+        out,
+        "{}\n    {{\"candidate\": {}, \"dof\": {}, \"statistic\": {}, \"p_value\": {}, "
+        "\"threshold\": {}, \"predicted_rms\": {}, \"conditional_statistic\": {}, "
+        "\"significant\": {}{}{}}}",
+        k ? "," : "", json_string(candidate_name(d, r.candidate)), r.marginal.dof,
+        json_number(r.marginal.statistic), json_number(r.marginal.p_value),
+        json_number(r.threshold), json_number(r.marginal.predicted_rms),
+        json_number(r.conditional.statistic), r.significant ? "true" : "false",
+        heldout_prediction(d, r.candidate).empty()
+            ? ""
+            : ", \"predicted_heldout_drop\": " + json_number(d.predicted_heldout_drop[r.candidate]),
+        r.marginal.error.empty() ? "" : ", \"error\": " + json_string(r.marginal.error));
   }
-  j += "],\n    \"confounded\": [";
+  fmt::format_to(
+      out, "],\n    \"refit_order\": {},",
+      json_string(d.refit_order_from_heldout ? "predicted held-out drop" : "training statistic"));
+  j += "\n    \"confounded\": [";
   for (std::size_t k = 0; k < d.ranking.confounded.size(); ++k) {
     const auto& c = d.ranking.confounded[k];
     fmt::format_to(out, "{}{{\"a\": {}, \"b\": {}, \"correlation\": {}}}", k ? ", " : "",
@@ -497,15 +512,19 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
   r += "\n## Which: screening at the nominal fit\n\n"
        "![ranking](ranking.svg)\n\n"
        "| rank | candidate | dof | score statistic | threshold | predicted rms (mm) | given those "
-       "above | significant |\n"
-       "|---:|---|---:|---:|---:|---:|---:|---|\n";
+       "above | significant | predicted held-out ‖h‖² drop (mm²) |\n"
+       "|---:|---|---:|---:|---:|---:|---:|---|---:|\n";
   for (std::size_t k = 0; k < d.ranking.order.size(); ++k) {
     const auto& x = d.ranking.order[k];
-    fmt::format_to(out, "| {} | {} | {} | {:.1f} | {:.1f} | {:.4f} | {:.1f} | {} |\n", k + 1,
+    fmt::format_to(out, "| {} | {} | {} | {:.1f} | {:.1f} | {:.4f} | {:.1f} | {} | {} |\n", k + 1,
                    candidate_name(d, x.candidate), x.marginal.dof, x.marginal.statistic,
                    x.threshold, x.marginal.predicted_rms * 1e3, x.conditional.statistic,
-                   x.significant ? "yes" : "");
+                   x.significant ? "yes" : "", heldout_prediction(d, x.candidate));
   }
+  if (d.refit_order_from_heldout)
+    r += "\nMore candidates cleared their threshold than are refitted: the refits were chosen "
+         "by the held-out drop each one's screening step predicts (a probed candidate: by one "
+         "held-out run at its probe).\n";
   fmt::format_to(out,
                  "\nThreshold: the χ²(dof) quantile at α = {:g} over {} candidates (Bonferroni); "
                  "noise from the residual's third differences.\n",
