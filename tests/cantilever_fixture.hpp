@@ -10,6 +10,7 @@
 #include "engine/fem_model.hpp"
 #include "engine/idas_integrator.hpp"
 #include "engine/mesh.hpp"
+#include "engine/mesh_refine.hpp"
 #include "engine/selection.hpp"
 #include "engine/static_solver.hpp"
 
@@ -25,12 +26,14 @@ struct Beam {
 
 /// The bar with `cells_across` cells over its height, neo-Hookean with (E, ν) plus
 /// optional extra terms (e.g. damping), under gravity −g e_z, its clamped end's
-/// lower corner at `origin`.
+/// lower corner at `origin`; the box mesh refined `refine` times (engine/mesh_refine).
 inline Beam make_beam(int cells_across, double gravity, std::vector<MaterialTerm> extra = {},
-                      const Eigen::Vector3d& origin = Eigen::Vector3d::Zero()) {
+                      const Eigen::Vector3d& origin = Eigen::Vector3d::Zero(), int refine = 0) {
   Beam b;
-  b.mesh = generate_box(origin, origin + Eigen::Vector3d(kLength, kHeight, kHeight),
-                        kHeight / cells_across);
+  b.mesh =
+      refine_uniformly(generate_box(origin, origin + Eigen::Vector3d(kLength, kHeight, kHeight),
+                                    kHeight / cells_across),
+                       refine);
   const double lambda = kE * kPoisson / ((1 + kPoisson) * (1 - 2 * kPoisson));
   const double mu = kE / (2 * (1 + kPoisson));
   const int ne = b.mesh.num_tets();

@@ -5,11 +5,13 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <set>
 #include <sstream>
 #include <string>
 
 #include "engine/error.hpp"
 #include "engine/mesh.hpp"
+#include "engine/mesh_refine.hpp"
 #include "engine/selection.hpp"
 
 using kelvin::Mesh;
@@ -56,6 +58,40 @@ TEST(GenerateBox, VolumeIsExactAndTetsArePositive) {
   EXPECT_GT(min_volume(m), 0);
   EXPECT_EQ(m.region.size(), static_cast<size_t>(m.num_tets()));
   EXPECT_NO_THROW(kelvin::validate_mesh(m));  // conforming: no face shared by three tets
+}
+
+// Red refinement of a file's mesh (two regions, dolfin's node order reoriented):
+// eight children per tetrahedron filling it exactly, one node per edge, conforming
+// and positively oriented, the regions kept, the original nodes first and unmoved.
+TEST(RefineMesh, SplitsEveryTetrahedronIntoEightConformingChildren) {
+  Mesh m = kelvin::generate_box({0, 0, 0}, {0.03, 0.02, 0.05}, 0.01);
+  for (int e = 0; e < m.num_tets(); ++e) m.region[e] = e % 2 ? 7 : 3;
+  std::set<std::pair<int, int>> edges;
+  for (int e = 0; e < m.num_tets(); ++e)
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) edges.insert(std::minmax(m.tets(a, e), m.tets(b, e)));
+  const Mesh r = kelvin::refine_uniformly(m);
+  EXPECT_EQ(r.num_tets(), 8 * m.num_tets());
+  EXPECT_EQ(r.num_nodes(), m.num_nodes() + static_cast<int>(edges.size()));
+  EXPECT_TRUE(r.nodes.leftCols(m.num_nodes()).isApprox(m.nodes, 0));
+  EXPECT_NEAR(total_volume(r), total_volume(m), 1e-15);
+  EXPECT_GT(min_volume(r), 0);
+  EXPECT_NO_THROW(kelvin::validate_mesh(r));
+  double largest_child = 0;
+  for (int e = 0; e < m.num_tets(); ++e) {
+    double children = 0;
+    for (int k = 0; k < 8; ++k) {
+      EXPECT_EQ(r.region[8 * e + k], m.region[e]);
+      children += kelvin::tet_volume(r, 8 * e + k);
+      largest_child =
+          std::max(largest_child, kelvin::tet_volume(r, 8 * e + k) / kelvin::tet_volume(m, e));
+    }
+    EXPECT_NEAR(children, kelvin::tet_volume(m, e), 1e-12 * kelvin::tet_volume(m, e));
+  }
+  // Every child of a red refinement is an eighth of its parent, octahedron's too.
+  EXPECT_NEAR(largest_child, 0.125, 1e-9);
+  EXPECT_EQ(kelvin::refine_uniformly(m, 2).num_tets(), 64 * m.num_tets());
+  EXPECT_EQ(kelvin::refine_uniformly(m, 0).num_tets(), m.num_tets());
 }
 
 TEST(GenerateBox, AtLeastOneCellPerDirection) {

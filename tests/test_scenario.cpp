@@ -272,3 +272,43 @@ TEST(YamlUtil, DidYouMean) {
             "did you mean 'element_size'?");
   EXPECT_EQ(yamlutil::suggestion("colour", {"density", "elastic"}), "allowed: density, elastic");
 }
+
+// `mesh.refine` splits a file's or a generated mesh uniformly before anything is
+// placed on it: clamps select the new nodes on their plane too, markers embed in
+// the children; nonsense levels and per-element fields of the unrefined mesh are
+// refused at the key.
+TEST(ScenarioMesh, RefineSplitsTheMeshBeforeClampsAndMarkersArePlaced) {
+  const auto dir = std::filesystem::temp_directory_path() / "kelvin_test_scenario_refine";
+  std::filesystem::create_directories(dir);
+  const std::string head =
+      "name: bar\nmesh: { generate: box, size: [0.1, 0.02, 0.02], "
+      "element_size: 0.01";
+  const std::string tail =
+      " }\nmaterial: { density: 900, elastic: { model: neo-hookean } }\ntime: { end: 0.1 }\n"
+      "clamps: [ { name: wall, select: { plane: { axis: x, at: 0 } } } ]\n";
+  const auto write = [&](const std::string& name, const std::string& text) {
+    const auto p = dir / name;
+    std::ofstream(p) << text;
+    return p.string();
+  };
+  const Scenario coarse = load_scenario(write("coarse.yaml", head + tail));
+  const Scenario fine = load_scenario(write("fine.yaml", head + ", refine: 1" + tail));
+  EXPECT_EQ(fine.mesh.num_tets(), 8 * coarse.mesh.num_tets());
+  // The clamped face: (2+1)×(2+1) nodes before, (4+1)×(4+1) after.
+  EXPECT_EQ(coarse.clamps[0].nodes.size(), 9u);
+  EXPECT_EQ(fine.clamps[0].nodes.size(), 25u);
+  for (const auto& [text, part] :
+       std::vector<std::pair<std::string, std::string>>{{", refine: 4", "4 levels: give 0 … 3"},
+                                                        {", refine: -1", "-1 levels"},
+                                                        {", refine: 1.5", "mesh.refine"}}) {
+    try {
+      load_scenario(write("bad.yaml", head + text + tail));
+      ADD_FAILURE() << text << " was accepted";
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find("bad.yaml:2:"), std::string::npos) << msg;
+      EXPECT_NE(msg.find(part), std::string::npos) << msg;
+    }
+  }
+  std::filesystem::remove_all(dir);
+}

@@ -11,6 +11,7 @@
 
 #include "engine/csv.hpp"
 #include "engine/error.hpp"
+#include "engine/mesh_refine.hpp"
 #include "materials/material.hpp"
 #include "yaml/scenario_sections.hpp"
 
@@ -309,7 +310,7 @@ Mesh generate(const Doc& d, const Node& m) {
       d.choice(d.required(m, "mesh", "generate"), "mesh.generate", {"box", "cylinder"});
   const double kMaxCells = 2e6;  // beyond this the run would not fit a workstation
   if (kind == "box") {
-    d.check_keys(m, "mesh", {"generate", "lo", "hi", "size", "element_size"});
+    d.check_keys(m, "mesh", {"generate", "lo", "hi", "size", "element_size", "refine"});
     const double h = d.positive(d.required(m, "mesh", "element_size"), "mesh.element_size", "m");
     Eigen::Vector3d lo = m["lo"] ? d.vec3(m["lo"], "mesh.lo") : Eigen::Vector3d::Zero();
     Eigen::Vector3d hi;
@@ -344,7 +345,7 @@ Mesh generate(const Doc& d, const Node& m) {
                          h, cells.prod(), cells[0], cells[1], cells[2]));
     return generate_box(lo, hi, h);
   }
-  d.check_keys(m, "mesh", {"generate", "radius", "height", "element_size", "axis"});
+  d.check_keys(m, "mesh", {"generate", "radius", "height", "element_size", "axis", "refine"});
   const double r = d.positive(d.required(m, "mesh", "radius"), "mesh.radius", "m");
   const double len = d.positive(d.required(m, "mesh", "height"), "mesh.height", "m");
   const double h = d.positive(d.required(m, "mesh", "element_size"), "mesh.element_size", "m");
@@ -400,7 +401,7 @@ Mesh read_or_generate(const Doc& d, const Node& m) {
     }
     return mesh;
   }
-  d.check_keys(m, "mesh", {"file"});
+  d.check_keys(m, "mesh", {"file", "refine"});
   const Node f = m["file"];
   const std::string file = d.existing_file(f, "mesh.file");
   const std::string ext = std::filesystem::path(file).extension().string();
@@ -420,14 +421,38 @@ Mesh read_or_generate(const Doc& d, const Node& m) {
 
 }  // namespace
 
+namespace {
+constexpr double kMaxRefinedTets = 1.2e7;  // a box of kMaxCells cells, six tetrahedra each
+}  // namespace
+
 Mesh load_mesh(const Doc& d, const Node& m) {
   Mesh mesh = read_or_generate(d, m);
+  if (const Node r = m["refine"]) {
+    // A mesh-convergence check on the same geometry: each level splits every
+    // tetrahedron into eight.
+    const long levels = d.integer(r, "mesh.refine");
+    if (levels < 0 || levels > 3)
+      d.fail(r, "mesh.refine",
+             fmt::format("{} levels: give 0 … 3 (each one multiplies the "
+                         "tetrahedra by 8)",
+                         levels));
+    const double tets = mesh.num_tets() * std::pow(8.0, static_cast<double>(levels));
+    if (tets > kMaxRefinedTets)
+      d.fail(r, "mesh.refine",
+             fmt::format("{} levels would make {:.3g} tetrahedra (at most {:.0e})", levels, tets,
+                         kMaxRefinedTets));
+    mesh = refine_uniformly(mesh, static_cast<int>(levels));
+  }
   // The material (and its fields file) is read before the mesh, so whether the
   // fields cover the mesh can only be told here; the file is read again, being
   // small next to the mesh, rather than widening the sections' interface.
   const Node material = d.root()["material"];
   if (material.IsMap() && material["fields"]) {
     const Node f = material["fields"];
+    if (m["refine"] && d.integer(m["refine"], "mesh.refine") > 0)
+      d.fail(m["refine"], "mesh.refine",
+             "material.fields gives values per element of the unrefined mesh; refine the mesh "
+             "where the fields were made, or drop the fields");
     try {
       check_elements(read_fields_table(d.existing_file(f, "material.fields")), mesh.num_tets(),
                      true);
