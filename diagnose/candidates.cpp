@@ -119,17 +119,16 @@ std::vector<Eigen::Vector3d> screening_directions() {
 }
 
 const std::vector<std::string>& candidate_ids() {
-  static const std::vector<std::string> ids = {
-      "stiffening", "damping_law",   "drag",         "inhomogeneity",    "added_mass", "anisotropy",
-      "sync_lag",   "marker_offset", "registration", "clamp_compliance", "unnamed"};
+  static const std::vector<std::string> ids = {"stiffening",       "damping_law",    "drag",
+                                               "inhomogeneity",    "added_mass",     "anisotropy",
+                                               "sync_lag",         "marker_offset",  "registration",
+                                               "clamp_compliance", "discretisation", "unnamed"};
   return ids;
 }
 
 const std::vector<std::pair<std::string, std::string>>& unavailable_candidates() {
   static const std::vector<std::pair<std::string, std::string>> u = {
-      {"relaxation", "a relaxing (Prony / standard-linear-solid) viscous term is not built yet"},
-      {"discretisation",
-       "judged by a mesh-refinement study (study_coarsening), not screened per case"}};
+      {"relaxation", "a relaxing (Prony / standard-linear-solid) viscous term is not built yet"}};
   return u;
 }
 
@@ -259,6 +258,29 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
       params.push_back(parameter(kRegistration));
     };
     out.push_back(reg);
+  }
+
+  // The numerical cause, so that it is not reported as a physical one: the mesh
+  // refined once (Real2Sim's coarsening study: a coarse mesh is too stiff, and biases
+  // what is fitted). Not where per-element values
+  // tie the parameters to the unrefined mesh.
+  const bool per_element =
+      !s.material.fields_path.empty() ||
+      std::any_of(s.fit.parameters.begin(), s.fit.parameters.end(),
+                  [](const auto& p) { return p.scope == FitParameterSpec::Scope::PerElement; });
+  if (!per_element && s.mesh.refined < 3 && 8.0 * s.mesh.num_tets() <= 1.2e7) {
+    Candidate mesh;
+    mesh.id = "discretisation";
+    mesh.where = "mesh";
+    mesh.screened = false;
+    mesh.description =
+        fmt::format("the discretisation: each tetrahedron split into eight ({} → {})",
+                    s.mesh.num_tets(), 8 * s.mesh.num_tets());
+    mesh.extend = [](const Candidate&, ModelEdits& m, YAML::Node&, bool) {
+      YAML::Node mesh = m.root["mesh"];
+      mesh["refine"] = (mesh["refine"] ? mesh["refine"].as<int>() : 0) + 1;
+    };
+    out.push_back(mesh);
   }
   return out;
 }

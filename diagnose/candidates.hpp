@@ -20,6 +20,7 @@ namespace kelvin {
 struct ModelEdits {
   YAML::Node elastic, viscous;         // sequences of term mappings
   YAML::Node clamps;                   // the `clamps:` sequence (undefined without one)
+  YAML::Node root;                     // the whole scenario (the mesh and solver sections)
   const MaterialSpec* spec = nullptr;  // the nominal material as loaded
 };
 
@@ -27,6 +28,9 @@ struct Candidate {
   std::string id;           // stable identifier in diagnosis.json (stiffening, drag, ...)
   std::string where;        // the marker it concerns ("" = the body or the capture)
   std::string description;  // one line for the report
+  /// false: no parameters of its own (the discretisation); judged by one run at the
+  /// nominal fit instead of the score, and refitted with the nominal parameters.
+  bool screened = true;
   /// The fibre direction a refit of the anisotropy starts from (screening picks it).
   Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
   /// Adds the candidate's terms to `material` and its parameter entries (mappings)
@@ -54,7 +58,8 @@ BodyAxis body_axis(const Scenario& scenario);
 double largest_modulus(const Scenario& scenario);
 
 /// Every built-in candidate that applies to `scenario` (a damping law needs a
-/// Newtonian term, a marker offset an observed marker), in a fixed order.
+/// Newtonian term, a marker offset an observed marker), in a fixed order, those not
+/// screened (Candidate::screened) last.
 std::vector<Candidate> builtin_candidates(const Scenario& scenario);
 
 /// Identifiers the diagnosis knows, for the `diagnose.candidates` check ("unnamed",

@@ -166,7 +166,7 @@ std::string diagnosis_json(const Diagnosis& d) {
         out,
         "{}\n    {{\"candidate\": {}, \"dof\": {}, \"statistic\": {}, \"p_value\": {}, "
         "\"threshold\": {}, \"predicted_rms\": {}, \"conditional_statistic\": {}, "
-        "\"significant\": {}{}{}}}",
+        "\"significant\": {}{}{}{}}}",
         k ? "," : "", json_string(candidate_name(d, r.candidate)), r.marginal.dof,
         json_number(r.marginal.statistic), json_number(r.marginal.p_value),
         json_number(r.threshold), json_number(r.marginal.predicted_rms),
@@ -174,7 +174,8 @@ std::string diagnosis_json(const Diagnosis& d) {
         heldout_prediction(d, r.candidate).empty()
             ? ""
             : ", \"predicted_heldout_drop\": " + json_number(d.predicted_heldout_drop[r.candidate]),
-        r.marginal.error.empty() ? "" : ", \"error\": " + json_string(r.marginal.error));
+        r.marginal.error.empty() ? "" : ", \"error\": " + json_string(r.marginal.error),
+        d.candidates[r.candidate].screened ? "" : ", \"model_check\": true");
   }
   fmt::format_to(
       out, "],\n    \"refit_order\": {},",
@@ -521,6 +522,17 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
                    x.threshold, x.marginal.predicted_rms * 1e3, x.conditional.statistic,
                    x.significant ? "yes" : "", heldout_prediction(d, x.candidate));
   }
+  for (const auto& x : d.ranking.order)
+    if (!d.candidates[x.candidate].screened && x.marginal.error.empty())
+      fmt::format_to(out,
+                     "\n{} has no parameters of its own to score: its row is one run of its "
+                     "model at the nominal fit (the statistic: how far the tracks moved, "
+                     "‖Δr‖²/σ̂²; the rms: that run's). {}\n",
+                     candidate_name(d, x.candidate),
+                     x.significant ? "They moved beyond the noise: it is refitted after the "
+                                     "top candidates unless one of them, or the nominal fit, "
+                                     "leaves only noise."
+                                   : "They did not move beyond the noise: it cannot matter.");
   if (d.refit_order_from_heldout)
     r += "\nMore candidates cleared their threshold than are refitted: the refits were chosen "
          "by the held-out drop each one's screening step predicts (a probed candidate: by one "

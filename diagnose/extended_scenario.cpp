@@ -43,6 +43,7 @@ ExtendedScenario write_extended_scenario(const std::string& source, const Scenar
   lists.elastic = as_sequence(yaml_child(material, "elastic"));
   lists.viscous = as_sequence(yaml_child(material, "viscous"));
   lists.clamps = root["clamps"];
+  lists.root = root;
   lists.spec = &nominal.material;
 
   ExtendedScenario out;

@@ -13,6 +13,7 @@ struct Mesh {
   std::vector<int> region;                     // per-tet region label (0 when the source has none)
   std::string source;                          // file path or generator description, for messages
   int reordered = 0;  // tetrahedra read in negative orientation and reordered (orient_tetrahedra)
+  int refined = 0;    // levels of uniform refinement applied (refine_uniformly)
 
   int num_nodes() const { return static_cast<int>(nodes.cols()); }
   int num_tets() const { return static_cast<int>(tets.cols()); }

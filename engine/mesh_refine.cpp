@@ -75,6 +75,7 @@ Mesh refine_uniformly(const Mesh& mesh, int levels) {
   Mesh out = mesh;
   for (int l = 0; l < levels; ++l) out = refine_once(out);
   if (levels > 0) out.source = fmt::format("{} (refined {}×)", mesh.source, levels);
+  out.refined = mesh.refined + levels;
   return out;
 }
 

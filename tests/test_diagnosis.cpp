@@ -113,8 +113,11 @@ const std::string kNominal = R"(  density: 1100
 
 // Captured at 1 kHz: the noise estimate assumes the model error is slow against the
 // frame rate (it cancels (2π f Δt)³ of it), and the bar is shaken at 13 and 17 Hz.
-std::string bar(const std::string& material, const std::string& tail, double end = 0.1) {
+std::string bar(const std::string& material, const std::string& tail, double end = 0.1,
+                const std::string& mesh_keys = "", const std::string& solver_keys = "") {
   test::ShakenBar b;
+  b.mesh_keys = mesh_keys;
+  b.solver_keys = solver_keys;
   b.material = material;
   b.end = end;
   b.output_rate = 1000;
@@ -169,13 +172,29 @@ TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
   ASSERT_TRUE(at_pads.ok) << at_pads.error;
   EXPECT_NEAR(at_pads.phi, base.phi, 1e-3 * base.phi);
 
+  // The discretisation is the one candidate that is not nested: the mesh split into
+  // eight, the nominal parameters alone.
+  const auto mesh = std::find_if(all.begin(), all.end(),
+                                 [](const Candidate& c) { return c.id == "discretisation"; });
+  ASSERT_NE(mesh, all.end());
+  EXPECT_FALSE(mesh->screened);
+  EXPECT_EQ(mesh, all.end() - 1);  // the unscreened come last
+  const Scenario refined = load_scenario(
+      write_extended_scenario(nominal.path, nominal, {&*mesh}, false, (dir / "mesh.yaml").string())
+          .path);
+  EXPECT_EQ(refined.mesh.num_tets(), 8 * nominal.mesh.num_tets());
+  EXPECT_EQ(refined.solver.lumped_mass, nominal.solver.lumped_mass);
+  EXPECT_EQ(refined.markers.embedded.size(), nominal.markers.embedded.size());
+  FitProblem fine(refined, refined.fit.parameters);
+  ASSERT_EQ(fine.map().size(), plain.map().size());
+
   std::vector<const Candidate*> with;
   for (const auto& c : all)
-    if (&c != &*pads) with.push_back(&c);
+    if (&c != &*pads && c.screened) with.push_back(&c);
   const ExtendedScenario ext =
       write_extended_scenario(nominal.path, nominal, with, true, (dir / "all.yaml").string());
   EXPECT_EQ(ext.nominal_specs, 2);
-  ASSERT_EQ(ext.candidate_specs.size(), all.size() - 1);
+  ASSERT_EQ(ext.candidate_specs.size(), all.size() - 2);
   const Scenario extended = load_scenario(ext.path);
   // The neo-Hookean term, the stiffening one and one fibre per screened direction.
   EXPECT_EQ(extended.material.elastic.size(), 1u + 1u + screening_directions().size());
@@ -236,11 +255,18 @@ TEST(LearnedCorrection, AtZeroChangesNothingAndItsSignatureReadsTheValues) {
 /// noise), a held-out motion of the same bar at other frequencies.
 fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned seed,
                         const std::string& candidates = "stiffening, drag, sync_lag, marker_offset",
-                        const std::string& more = "") {
+                        const std::string& more = "", bool truth_refined = false) {
+  // The specimen's own discretisation: the same box, each tetrahedron split into
+  // eight (a truth the nominal mesh cannot reach).
+  const std::string mesh_keys = truth_refined ? ", refine: 1" : "";
+  const std::string solver_keys;
   const std::string train = test::noisy_tracks(
-      test::simulate_tracks(dir, "truth-train", bar(truth, test::kShakenBarMarkers)),
+      test::simulate_tracks(dir, "truth-train",
+                            bar(truth, test::kShakenBarMarkers, 0.1, mesh_keys, solver_keys)),
       dir / "train.csv", 1e-5, seed);
   test::ShakenBar h;
+  h.mesh_keys = mesh_keys;
+  h.solver_keys = solver_keys;
   h.material = truth;
   h.end = 0.1;
   h.output_rate = 1000;
@@ -255,6 +281,7 @@ fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned 
       test::noisy_tracks(test::simulate_tracks(dir, "truth-heldout", test::shaken_bar_yaml(h)),
                          dir / "heldout.csv", 1e-5, seed + 1);
   h.material = kNominal;
+  h.mesh_keys = h.solver_keys = "";
   h.tail = test::kShakenBarMarkers + "\n  observed: " + held + "\n";
   test::write_text(dir / "heldout.yaml", test::shaken_bar_yaml(h));
   test::write_text(dir / "train.yaml",
@@ -334,6 +361,35 @@ TEST(Diagnosis, FindsNoEffectWhereThereIsNone) {
   EXPECT_LT(d.missing_force.statistic, d.missing_force.threshold);
   // Nor is the nominal residual above the noise: no learned correction is fitted.
   EXPECT_EQ(d.learned, -1);
+}
+
+// Tracks of the same material on a finer mesh (each tetrahedron split into eight):
+// the coarse nominal mesh is too stiff and its fit bends μ to make
+// up for it. The diagnosis names the numerical cause, not a physical one, and the
+// refit on the finer mesh recovers the true μ.
+TEST(Diagnosis, ACoarseMeshIsNamedAsTheDiscretisationNotAsPhysics) {
+  const fs::path dir = test::scratch("diagnosis-mesh");
+  const std::string truth = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 20 })";
+  const fs::path scenario = diagnosis_case(dir, truth, 17, "stiffening, drag, discretisation",
+                                           "  missing_force: false\n", true);
+  const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), {});
+  write_diagnosis_outputs(d);
+  EXPECT_EQ(d.effect, "discretisation");
+  ASSERT_GE(d.accepted, 0);
+  const RefitResult& a = d.refits[d.accepted];
+  EXPECT_EQ(a.dof, 0);
+  ASSERT_EQ(a.heldout.size(), 1u);
+  EXPECT_GT(d.nominal_train.rms, 3 * d.noise.sigma);
+  EXPECT_LT(a.train.rms, 1.3 * d.noise.sigma);
+  EXPECT_LT(a.heldout[0].after.rms, 1.3 * d.noise.sigma);
+  ASSERT_EQ(a.nominal_parameters.size(), 2u);
+  EXPECT_EQ(a.nominal_parameters[0].name, "elastic.mu");
+  EXPECT_NEAR(a.nominal_parameters[0].value, 1.0e5, 0.02e5);
+  EXPECT_LT(d.nominal_parameters[0].value, 0.95e5);  // the stiff coarse mesh's μ
+  ASSERT_FALSE(d.verdict_where.empty());
+  EXPECT_EQ(d.verdict_where[0], "mesh");
 }
 
 // A bulk modulus three times the nominal's: at these strains no named candidate

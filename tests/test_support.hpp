@@ -65,7 +65,8 @@ struct ShakenBar {
   double frequency_y = 17, frequency_z = 13;        // Hz
   double end = 0.1, output_rate = 200;              // s, Hz
   double rtol = 1e-9, atol = 1e-13;
-  std::string clamp_keys;  // more keys of the clamp's entry, e.g. "compliance: 1e-7"
+  std::string clamp_keys;              // more keys of the clamp's entry, e.g. "compliance: 1e-7"
+  std::string mesh_keys, solver_keys;  // more keys of those mappings, e.g. ", refine: 1"
   std::string tail;
 };
 
@@ -80,7 +81,7 @@ markers:
 inline std::string shaken_bar_yaml(const ShakenBar& b) {
   return fmt::format(R"(
 name: {}
-mesh: {{ generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01 }}
+mesh: {{ generate: box, lo: [0, 0, 0], hi: [0.06, 0.02, 0.02], element_size: 0.01{} }}
 material:
 {}
 gravity: [0, 0, -9.81]
@@ -95,10 +96,11 @@ clamps:
           - {{ amplitude: {}, frequency: {}, phase: -1.5707963267948966, direction: [0, 1, 0] }}
           - {{ amplitude: {}, frequency: {}, phase: -1.5707963267948966, direction: [0, 0, 1] }}
 time: {{ end: {}, output_rate: {} }}
-solver: {{ rtol: {}, atol: {} }}
+solver: {{ rtol: {}, atol: {}{} }}
 )",
-                     b.name, b.material, b.clamp_keys, b.amplitude_y, b.frequency_y, b.amplitude_z,
-                     b.frequency_z, b.end, b.output_rate, b.rtol, b.atol) +
+                     b.name, b.mesh_keys, b.material, b.clamp_keys, b.amplitude_y, b.frequency_y,
+                     b.amplitude_z, b.frequency_z, b.end, b.output_rate, b.rtol, b.atol,
+                     b.solver_keys) +
          b.tail;
 }
 
