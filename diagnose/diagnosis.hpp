@@ -30,6 +30,7 @@
 #include "diagnose/noise.hpp"
 #include "diagnose/ranking.hpp"
 #include "diagnose/where.hpp"
+#include "drivers/stiffness_scan.hpp"
 
 namespace kelvin {
 
@@ -85,6 +86,10 @@ struct Diagnosis {
   DiagnoseSettings settings;
   std::vector<Candidate> candidates;
   // Stage 1
+  /// The stiffness scan before the nominal fit (empty when not run) and the scale
+  /// of the scenario's moduli the fit started from.
+  std::vector<ScanPoint> stiffness_scan;
+  double stiffness_scale = 1;
   int nominal_evaluations = 0;
   std::vector<NamedValue> nominal_parameters;
   MisfitFigures nominal_train;

@@ -116,12 +116,17 @@ std::string diagnosis_json(const Diagnosis& d) {
       d.second_candidate >= 0 ? json_string(candidate_name(d, d.second_candidate)) : "null");
   fmt::format_to(out, "  \"noise\": {{\"sigma\": {}, \"third_differences\": {}, \"rms\": {}}},\n",
                  json_number(d.noise.sigma), d.noise.differences, json_number(d.noise.naive));
-  fmt::format_to(out,
-                 "  \"nominal\": {{\"evaluations\": {}, \"parameters\": {}, \"train_rms\": {}, "
-                 "\"heldout_rms\": {}}},\n",
-                 d.nominal_evaluations, json_values(d.nominal_parameters),
-                 json_number(d.nominal_train.rms),
-                 json_number(heldout_rms(d.nominal_heldout, false)));
+  fmt::format_to(
+      out,
+      "  \"nominal\": {{\"evaluations\": {}, \"parameters\": {}, \"train_rms\": {}, "
+      "\"heldout_rms\": {}, \"start_scale\": {}, \"stiffness_scan\": [",
+      d.nominal_evaluations, json_values(d.nominal_parameters), json_number(d.nominal_train.rms),
+      json_number(heldout_rms(d.nominal_heldout, false)), json_number(d.stiffness_scale));
+  for (std::size_t k = 0; k < d.stiffness_scan.size(); ++k)
+    fmt::format_to(out, "{}{{\"scale\": {}, \"rms\": {}}}", k ? ", " : "",
+                   json_number(d.stiffness_scan[k].scale),
+                   d.stiffness_scan[k].ok ? json_number(d.stiffness_scan[k].rms) : "null");
+  j += "]},\n";
   // Where.
   j += "  \"where\": {\n    \"markers\": [";
   for (std::size_t k = 0; k < d.where.markers.size(); ++k) {
@@ -467,6 +472,17 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
                  d.noise.differences, d.noise.naive * 1e3);
   for (const auto& v : d.nominal_parameters)
     fmt::format_to(out, "| {} | {:.6g} |\n", v.name, v.value);
+  if (!d.stiffness_scan.empty()) {
+    fmt::format_to(out,
+                   "\nThe fit started at ×{:.3g} of the scenario's moduli, the best of a scan of "
+                   "one common scale of them (forward runs at the first stage's tolerances; "
+                   "under periodic motion Φ has a basin per resonance):\n\n| scale | rms (mm) "
+                   "|\n|---:|---:|\n",
+                   d.stiffness_scale);
+    for (const auto& p : d.stiffness_scan)
+      fmt::format_to(out, "| {:.3g} | {} |\n", p.scale,
+                     p.ok ? fmt::format("{:.4f}", p.rms * 1e3) : "failed");
+  }
   r += "\n## Where\n\n![residual per marker](residual.svg)\n\n"
        "| marker | region | along | rms x | rms y | rms z | excess over noise | gain | delay (ms) "
        "|\n"

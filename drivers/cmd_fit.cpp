@@ -11,6 +11,7 @@
 #include "drivers/fit_loop.hpp"
 #include "drivers/fit_outputs.hpp"
 #include "drivers/fit_state.hpp"
+#include "drivers/stiffness_scan.hpp"
 #include "engine/error.hpp"
 #include "yaml/scenario.hpp"
 
@@ -144,6 +145,21 @@ int run(const FitArgs& args) {
   options.on_progress = [&](const std::string& line) {
     if (!args.quiet) fmt::print("{}\n", line);
   };
+
+  if (!args.resume && scenario.fit.start_scan == "stiffness") {
+    const StiffnessScan scan = scan_stiffness(*problem, p0, options, options.on_progress);
+    if (scan.entries.empty()) {
+      if (!args.quiet) fmt::print("fit.start_scan: no elastic modulus is fitted; no scan\n");
+    } else {
+      if (!args.quiet)
+        fmt::print("starting at ×{:.3g} of the scenario's moduli (the scan's best)\n", scan.scale);
+      p0 = scan.p;
+    }
+    if (g_interrupted) {
+      fmt::print(stderr, "interrupted during the stiffness scan; nothing fitted yet\n");
+      return kExitInterrupted;
+    }
+  }
 
   FitSummary summary;
   summary.outdir = outdir;

@@ -233,6 +233,10 @@ struct FitSpec {
   int checkpoint_steps = 0;              // most steps one adjoint segment stores; 0 = default
   double segment = 0;                    // s per adjoint segment; 0 = automatic
   double start_rtol = 0;                 // rtol of the fit's first stage; 0 = automatic
+  /// A global start before the local fit: "stiffness" (a scan of a common scale of
+  /// the fitted moduli), "none", or empty when not given (kelvin fit: none;
+  /// kelvin diagnose's nominal fit: stiffness).
+  std::string start_scan;
 };
 
 struct Scenario {

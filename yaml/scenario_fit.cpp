@@ -445,7 +445,7 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
   d.check_keys(n, P,
                {"parameters", "objective", "gradient", "algorithm", "max_evaluations", "ftol_rel",
                 "xtol_rel", "max_seconds", "smoothness", "lcurve", "experiments",
-                "checkpoint_steps", "segment", "start_rtol"});
+                "checkpoint_steps", "segment", "start_rtol", "start_scan"});
   FitSpec f;
   f.present = true;
 
@@ -508,6 +508,8 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
                          "the tolerances, down to solver.rtol (got {:g})",
                          s.solver.rtol, f.start_rtol));
   }
+  if (const Node v = n["start_scan"])
+    f.start_scan = d.choice(v, join(P, "start_scan"), {"stiffness", "none"});
   if (const Node v = n["smoothness"]) f.smoothness = d.non_negative(v, join(P, "smoothness"), "");
   if (const Node v = n["lcurve"]) {
     const std::string LP = join(P, "lcurve");
