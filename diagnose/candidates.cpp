@@ -262,8 +262,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
 
   // The numerical cause, so that it is not reported as a physical one: the mesh
   // refined once (Real2Sim's coarsening study: a coarse mesh is too stiff, and biases
-  // what is fitted). Not where per-element values
-  // tie the parameters to the unrefined mesh.
+  // what is fitted). Not where per-element values tie the parameters to the mesh.
   const bool per_element =
       !s.material.fields_path.empty() ||
       std::any_of(s.fit.parameters.begin(), s.fit.parameters.end(),
@@ -277,8 +276,8 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
         fmt::format("the discretisation: each tetrahedron split into eight ({} → {})",
                     s.mesh.num_tets(), 8 * s.mesh.num_tets());
     mesh.extend = [](const Candidate&, ModelEdits& m, YAML::Node&, bool) {
-      YAML::Node mesh = m.root["mesh"];
-      mesh["refine"] = (mesh["refine"] ? mesh["refine"].as<int>() : 0) + 1;
+      YAML::Node section = m.root["mesh"];
+      section["refine"] = (section["refine"] ? section["refine"].as<int>() : 0) + 1;
     };
     out.push_back(mesh);
   }

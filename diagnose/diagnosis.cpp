@@ -753,9 +753,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // differences), whose logarithm is about normal with variance 2/(N − n) + 2/M;
   // tested at α/m like every candidate (V01, no effect: 0.502 mm against σ̂ 0.492, a
   // log ratio of 0.040 where α/m puts the bar at about 0.07 and α alone at 0.05).
+  const auto noise_ratio = [&](double sum_sq, int parameters) {
+    return sum_sq / std::max(1.0, N - parameters) / sigma2;
+  };
   const auto more_than_noise = [&](double sum_sq, int parameters) {
     const double dof = std::max(1.0, N - parameters);
-    return std::log(sum_sq / dof / sigma2) >
+    return std::log(noise_ratio(sum_sq, parameters)) >
            normal_quantile(d.settings.alpha / m) *
                std::sqrt(2 / dof + 2.0 / std::max(1, d.noise.differences));
   };
@@ -804,7 +807,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     say(fmt::format(
         "stage 5: no named candidate explains the gap (nominal ‖r‖² {:.2f}× the noise's): "
         "a learned stress correction",
-        d.nominal_train.sum_sq / std::max(1.0, N - n_nominal) / sigma2));
+        noise_ratio(d.nominal_train.sum_sq, n_nominal)));
     d.candidates.push_back(learned_correction(nominal));
     const int c = static_cast<int>(d.candidates.size()) - 1;
     // From the Gauss–Newton step at the nominal fit: the correction is linear in its

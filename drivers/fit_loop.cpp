@@ -59,9 +59,6 @@ double objective_scale(bool ok, double objective, const Eigen::VectorXd& gradien
 /// minimum takes at most twice the last accepted move instead (see run_fit).
 constexpr double kFirstStep = 0.5;
 
-/// See the trial step limit in objective().
-constexpr long kTrialStepFactor = 4;
-
 /// A line-search trial this close to the best point (relative, or in log space)
 /// is not simulated: see the stall test in objective().
 constexpr double kStallStep = 1e-6;
@@ -295,17 +292,8 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
   try {
     GradientOptions gopt = c.options.gradient;
     gopt.tolerance_scale *= c.tolerance_scale;
-    // A line-search trial far out in parameter space (a flow index of 5, say) can
-    // make the DAE so stiff that one simulation takes an hour: the joint
-    // four-parameter bar fit sat 30 min in one trial after 5 s evaluations. A trial
-    // that needs kTrialStepFactor× the best point's steps fails instead, and the
-    // line search backs off as from any failed simulation. The limit is paced: on
-    // the bench bar with tracks from a tight-tolerance truth, two trials ran 4.3×
-    // the best's pace to t = 1.86 and 1 s of 2 before failing, 18 s of an 83 s fit.
-    if (c.best_steps > 0 && gopt.max_steps == 0) {
-      gopt.max_steps = kTrialStepFactor * c.best_steps;
-      gopt.step_pace_floor = 1.0 / kTrialStepFactor;
-    }
+    // A failed trial makes the line search back off (see limit_trial_steps).
+    limit_trial_steps(gopt, c.best_steps);
     if (grad.empty()) gopt.method = GradientMethod::kNone;
     const Evaluation ev = c.problem.evaluate(p, gopt);
 
@@ -427,6 +415,17 @@ bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd
   if (!(s > 0) || !std::isfinite(s)) return false;
   c.basis = s * L;
   return true;
+}
+
+void limit_trial_steps(GradientOptions& options, long reference_steps) {
+  // The joint four-parameter bar fit sat 30 min in one trial (a flow index of 5)
+  // after 5 s evaluations. The limit is paced: on the bench bar with tracks from a
+  // tight-tolerance truth, two trials ran 4.3× the best's pace to t = 1.86 and 1 s
+  // of 2 before failing, 18 s of an 83 s fit.
+  constexpr long kTrialStepFactor = 4;
+  if (reference_steps <= 0 || options.max_steps != 0) return;
+  options.max_steps = kTrialStepFactor * reference_steps;
+  options.step_pace_floor = 1.0 / kTrialStepFactor;
 }
 
 FitOptions fit_options_of(const Scenario& scenario) {

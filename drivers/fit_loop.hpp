@@ -86,6 +86,12 @@ FitOptions fit_options_of(const Scenario& scenario);
 
 FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOptions& options);
 
+/// A trial far out in parameter space can make the DAE so stiff that one simulation
+/// takes an hour. With a reference run's step count (the best point's; 0: none yet)
+/// and no limit of the caller's, a trial that needs 4× its steps, at any point at
+/// more than 4× its pace, fails instead.
+void limit_trial_steps(GradientOptions& options, long reference_steps);
+
 /// One point of an L-curve sweep over the smoothness weight γ.
 struct LcurvePoint {
   double gamma = 0;

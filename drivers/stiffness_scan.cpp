@@ -11,9 +11,6 @@ namespace {
 
 constexpr double kRatio = 1.25;  // a basin ×1.25 wide holds a grid point or its edge
 constexpr int kHalfWidth = 7;    // ×0.21 … ×4.8: resonances ×0.46 … ×2.2
-/// A soft trial sags further and may take more steps; beyond this many times the
-/// start's it fails rather than stall the scan (as the fit's trials do).
-constexpr long kStepFactor = 4;
 
 }  // namespace
 
@@ -63,10 +60,10 @@ StiffnessScan scan_stiffness(FitProblem& problem, const Eigen::VectorXd& p0,
     pt.phi = ev.phi;
     pt.rms = ev.rms;
     pt.error = ev.error;
-    if (s == 1 && pt.ok && g.max_steps == 0) {
+    if (s == 1 && pt.ok) {  // the others may not stall the scan (as the fit's trials)
       long steps = 0;
       for (const auto& e : ev.experiments) steps = std::max(steps, e.forward_stats.steps);
-      g.max_steps = kStepFactor * steps;
+      limit_trial_steps(g, steps);
     }
     // The start wins ties: it is the user's guess.
     if (pt.ok && pt.phi < best) {
