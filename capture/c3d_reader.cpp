@@ -13,6 +13,7 @@
 #include <optional>
 
 #include "engine/error.hpp"
+#include "engine/input_size.hpp"
 
 namespace kelvin {
 namespace {
@@ -198,6 +199,7 @@ double metres_per(const std::string& unit, const std::string& path) {
 }  // namespace
 
 Capture read_c3d(const std::string& path) {
+  check_data_file(path, "C3D file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(fmt::format("{}: cannot open the C3D file", path));
   std::vector<unsigned char> data((std::istreambuf_iterator<char>(in)),

@@ -12,12 +12,14 @@
 #include <set>
 
 #include "engine/error.hpp"
+#include "engine/input_size.hpp"
 
 namespace kelvin {
 
 /// Lines of a CSV file with their 1-based numbers; blank and '#' lines dropped,
 /// CR of CRLF endings removed.
 std::vector<std::pair<int, std::string>> read_csv_lines(const std::string& path) {
+  check_data_file(path, "CSV file");
   std::ifstream in(path);
   if (!in) throw Error(fmt::format("{}: cannot open ({})", path, std::strerror(errno)));
   std::vector<std::pair<int, std::string>> lines;

@@ -12,12 +12,15 @@
 #include <string>
 
 #include "engine/error.hpp"
+#include "engine/input_size.hpp"
 
 namespace kelvin {
 
 class MeshTextReader {
  public:
-  explicit MeshTextReader(std::string path) : path_(std::move(path)), in_(path_) {
+  explicit MeshTextReader(std::string path) : path_(std::move(path)) {
+    check_data_file(path_, "mesh file");
+    in_.open(path_);
     if (!in_) throw Error(fmt::format("{}: cannot open ({})", path_, std::strerror(errno)));
   }
   const std::string& path() const { return path_; }

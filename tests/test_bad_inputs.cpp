@@ -96,6 +96,70 @@ TEST(BadInputs, CommandLineRangeErrorsExitOne) {
   EXPECT_EQ(unknown.exit_code, 1) << unknown.out;
 }
 
+// Messages that once misled: each names the real problem at the key.
+TEST(BadInputs, ScenarioValuesOutOfReachAreNamedForWhatTheyAre) {
+  const fs::path dir = test::scratch("bad-values");
+  const auto out = " -o " + (dir / "out").string();
+  const std::string bar_E =
+      std::string(kBar).replace(kBar.find("lambda: 1.0e5, mu: 1.0e5"), 24, "E: 1.0e308, nu: 0.3");
+  test::write_text(dir / "E.yaml", bar_E + "time: { end: 0.01 }\n");
+  expect_input_error("simulate " + (dir / "E.yaml").string() + out,
+                     "lambda is beyond any material (at most 1e+20 Pa");
+  const std::string bar_huge = std::string(kBar).replace(kBar.find("lambda: 1.0e5, mu: 1.0e5"), 24,
+                                                         "lambda: 1.0e299, mu: 1.0e299");
+  test::write_text(dir / "huge.yaml", bar_huge + "time: { end: 0.01 }\n");
+  expect_input_error("simulate " + (dir / "huge.yaml").string() + out,
+                     "huge.yaml:6:42: material.elastic.lambda: is beyond any material");
+  expect_input_error(
+      "simulate " + scenario(dir, "bigint", "time: { end: 0.01 }\nsolver: { max_steps: 1e30 }\n") +
+          out,
+      "solver.max_steps: 1e30 is too large (at most 9e15)");
+  expect_input_error(
+      "simulate " +
+          scenario(dir, "merge", "time: { end: 0.01 }\nsolver:\n  <<: { rtol: 1.0e-4 }\n") + out,
+      "merge.yaml:12:3: solver.<<: YAML merge keys are not supported");
+  test::write_text(dir / "deep.yaml",
+                   "name: " + std::string(100000, '[') + std::string(100000, ']') + "\n");
+  expect_input_error("simulate " + (dir / "deep.yaml").string() + out,
+                     "levels deep, the reader's limit");
+  std::string bar_dir = kBar;
+  bar_dir.replace(bar_dir.find("{ generate: box"),
+                  bar_dir.find('\n', bar_dir.find("mesh:")) - bar_dir.find("{ generate: box"),
+                  "{ file: " + dir.string() + " }");
+  test::write_text(dir / "meshdir.yaml", bar_dir + "time: { end: 0.01 }\n");
+  expect_input_error("simulate " + (dir / "meshdir.yaml").string() + out,
+                     "mesh.file: '" + dir.string() + "' is a directory, not a file");
+}
+
+// A data file beyond what any simulation here can use is refused before it is read
+// (a sparse file: no disk is spent), so memory stays bounded.
+TEST(BadInputs, AnOversizedDataFileIsRefusedBeforeReading) {
+  const fs::path dir = test::scratch("bad-size");
+  const fs::path big = dir / "huge.msh";
+  { std::ofstream(big).put('$'); }
+  fs::resize_file(big, std::uintmax_t{600} << 20);
+  std::string bar = kBar;
+  bar.replace(bar.find("{ generate: box"),
+              bar.find('\n', bar.find("mesh:")) - bar.find("{ generate: box"),
+              "{ file: huge.msh }");
+  test::write_text(dir / "big.yaml", bar + "time: { end: 0.01 }\n");
+  expect_input_error(
+      "simulate " + (dir / "big.yaml").string() + " -o " + (dir / "out").string(),
+      "huge.msh: 600 MiB is more than kelvin reads as a mesh file (at most 512 MiB)");
+  { std::ofstream(dir / "tracks.csv").put('t'); }
+  fs::resize_file(dir / "tracks.csv", std::uintmax_t{600} << 20);
+  try {
+    read_marker_tracks((dir / "tracks.csv").string());
+    FAIL() << "a 600 MiB CSV was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("600 MiB is more than kelvin reads as a CSV file"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::remove(big);
+  fs::remove(dir / "tracks.csv");
+}
+
 // scipy and ROS write quaternions x, y, z, w: a header that says so is read so.
 TEST(BadInputs, AClampCsvHeaderSetsTheQuaternionOrder) {
   const fs::path dir = test::scratch("clamp-order");

@@ -35,9 +35,16 @@ std::string names_list(const std::vector<std::string>& names) {
 /// What is wrong with value v of parameter p for the model, or "" when nothing.
 std::string param_problem(const ParamInfo& p, double v) {
   if (p.positive && v <= 0) return "must be positive";
+  // Beyond this, products in the tangent and the Newton solve overflow doubles.
+  constexpr double kMaxModulus = 1e20;
+  if (p.unit == "Pa" && std::abs(v) > kMaxModulus)
+    return fmt::format("is beyond any material (at most {:g} Pa; kelvin's units are SI)",
+                       kMaxModulus);
   if (v >= p.lower && v <= p.upper) return "";
-  if (p.upper >= 1e300) return fmt::format("must be at least {}", with_unit(p.lower, p.unit));
-  if (p.lower <= -1e300) return fmt::format("must be at most {}", with_unit(p.upper, p.unit));
+  if (v < p.lower && p.upper >= 1e300)
+    return fmt::format("must be at least {}", with_unit(p.lower, p.unit));
+  if (v > p.upper && p.lower <= -1e300)
+    return fmt::format("must be at most {}", with_unit(p.upper, p.unit));
   return fmt::format("must be within [{:g}, {:g}]{}", p.lower, p.upper,
                      p.unit.empty() || p.unit == "1" ? "" : " " + p.unit);
 }

@@ -1,6 +1,7 @@
 #include "yaml/yaml_util.hpp"
 
 #include <fmt/format.h>
+#include <yaml-cpp/depthguard.h>
 
 #include <algorithm>
 #include <cmath>
@@ -71,6 +72,11 @@ Doc::Doc(const std::string& path) : file_(path) {
                     path, size / 1e6, kMaxBytes >> 20));
   try {
     root_ = YAML::LoadFile(path);
+  } catch (const YAML::DeepRecursion& e) {
+    fail(e.mark, "",
+         fmt::format("YAML nested {} levels deep, the reader's limit (a scenario needs a "
+                     "handful)",
+                     e.depth()));
   } catch (const YAML::ParserException& e) {
     fail(e.mark, "", "YAML syntax error: " + e.msg);
   } catch (const YAML::Exception& e) {
@@ -97,6 +103,12 @@ void Doc::require_map(const YAML::Node& node, const std::string& path) const {
     fail(node, path.empty() ? "(top level)" : path,
          node.IsNull() ? "is empty; expected a mapping of keys"
                        : "expected a mapping of keys (key: value)");
+  // yaml-cpp reads a merge key as a key named "<<", so its keys would go missing.
+  for (auto it = node.begin(); it != node.end(); ++it)
+    if (it->first.IsScalar() && it->first.Scalar() == "<<")
+      fail(it->first.Mark(), join(path, "<<"),
+           "YAML merge keys are not supported; write the keys out (an alias '*name' "
+           "of a whole value works)");
 }
 
 void Doc::require_sequence(const YAML::Node& node, const std::string& path) const {
@@ -150,8 +162,10 @@ double Doc::number(const YAML::Node& node, const std::string& path) const {
 
 long Doc::integer(const YAML::Node& node, const std::string& path) const {
   const double v = number(node, path);
-  if (v != std::floor(v) || std::abs(v) > 9e15)
+  if (v != std::floor(v))
     fail(node, path, fmt::format("must be a whole number (got {})", node.Scalar()));
+  if (std::abs(v) > 9e15)
+    fail(node, path, fmt::format("{} is too large (at most 9e15)", node.Scalar()));
   return static_cast<long>(v);
 }
 
@@ -211,6 +225,8 @@ std::string Doc::existing_file(const YAML::Node& node, const std::string& path) 
                          : fmt::format("no such file '{}' (paths are relative to the scenario "
                                        "file: looked for {})",
                                        written, file));
+  if (std::filesystem::is_directory(file))
+    fail(node, path, fmt::format("'{}' is a directory, not a file", written));
   return file;
 }
 
