@@ -102,7 +102,7 @@ int run(const FitArgs& args) {
             fmt::format("{}: the saved counters or best values are not finite and "
                         "non-negative; start without --resume",
                         state_path));
-      history.load_existing();
+      history.load_existing(saved.evaluations);
       state = saved;
       p0 = saved.best;
       options.first_evaluation = saved.evaluations;

@@ -30,7 +30,7 @@ FitHistoryFile::FitHistoryFile(std::string path, const ParameterMap& map)
   header_ += ",error";
 }
 
-void FitHistoryFile::load_existing() {
+void FitHistoryFile::load_existing(int evaluations) {
   std::ifstream in(path_);
   if (!in) return;
   std::string line;
@@ -62,6 +62,7 @@ void FitHistoryFile::load_existing() {
     } catch (const std::exception&) {
       throw Error(fmt::format("{}: line {}: not a history row", path_, number));
     }
+    if (r.evaluation > evaluations) continue;
     rows_.push_back(line);
     records_.push_back(r);
   }

@@ -19,9 +19,11 @@ class FitHistoryFile {
  public:
   static constexpr int kHistoryParameterColumns = 64;
   FitHistoryFile(std::string path, const ParameterMap& map);
-  /// Keeps the rows of an existing file (for --resume); throws kelvin::Error when
-  /// its header belongs to another parameter map.
-  void load_existing();
+  /// Keeps the rows of evaluations 1…`evaluations` of an existing file (for
+  /// --resume): a kill between writing the history and the state leaves a row the
+  /// state does not count. Throws kelvin::Error when the header belongs to another
+  /// parameter map.
+  void load_existing(int evaluations);
   void append(const FitRecord& record);  // and rewrite the file
   /// Records of the loaded rows (without parameter vectors), for the report.
   const std::vector<FitRecord>& records() const { return records_; }

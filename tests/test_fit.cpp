@@ -7,14 +7,20 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <csignal>
 #include <cstdlib>
+#include <map>
 #include <numbers>
 #include <numeric>
 #include <random>
+#include <set>
 #include <sstream>
+
+#include <unistd.h>
 
 #include "adjoint/uncertainty.hpp"
 #include "drivers/fit_loop.hpp"
+#include "drivers/fit_state.hpp"
 #include "engine/csv.hpp"
 #include "test_support.hpp"
 
@@ -386,6 +392,59 @@ TEST(FitCli, InterruptWritesTheBestSoFarAndSaysHowToResume) {
   EXPECT_TRUE(test::fs::exists(dir / "out" / "report.md"));
   EXPECT_NE(test::read_text(out + ".log").find("--resume"), std::string::npos);
   EXPECT_LT(history_rows(dir / "out" / "history.csv"), 50);
+}
+
+/// The fitted parameters of a finished fit, by label, from its fit-state.yaml.
+std::map<std::string, double> fitted_parameters(const path& state_file) {
+  const FitState s = read_fit_state(state_file.string());
+  std::map<std::string, double> p;
+  for (size_t j = 0; j < s.labels.size(); ++j) p[s.labels[j]] = s.best[j];
+  return p;
+}
+
+// SIGKILL leaves no chance to write anything: what was saved after each evaluation
+// must be enough for --resume to reach the result of a fit that ran through. The
+// kill lands at an evaluation drawn from the process id (different on every run).
+TEST(FitCli, AFitKilledAtAnyEvaluationResumesToTheSameResult) {
+  const path dir = cli_scenario("fit-sigkill");
+  const std::string fit = std::string(KELVIN_BINARY) + " fit " + (dir / "fit.yaml").string();
+  const std::string through = (dir / "through").string(), killed = (dir / "killed").string();
+  const auto full = test::run_kelvin("fit " + (dir / "fit.yaml").string() + " -q -o " + through +
+                                     " --max-evaluations 40");
+  ASSERT_EQ(full.exit_code, 0) << full.out;
+  const int total = history_rows(dir / "through" / "history.csv");
+  ASSERT_LT(total, 40) << "the fit did not converge within its budget";
+
+  const int kill_at = 1 + static_cast<int>(getpid()) % std::max(1, total - 1);
+  const std::string script = fit + " -q -o " + killed + " --max-evaluations 40 > " + killed +
+                             ".log 2>&1 & pid=$!; while [ \"$(grep -c . " + killed +
+                             "/history.csv 2>/dev/null || echo 0)\" -le " +
+                             std::to_string(kill_at) +
+                             " ]; do sleep 0.01; done; kill -KILL $pid; wait $pid";
+  const int status = std::system(("bash -c '" + script + "'").c_str());
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGKILL) << "killed at evaluation " << kill_at;
+  const int saved = history_rows(dir / "killed" / "history.csv");
+  ASSERT_GE(saved, kill_at);
+  ASSERT_LT(saved, total) << "the fit finished before the kill";
+
+  const auto resumed = test::run_kelvin("fit " + (dir / "fit.yaml").string() + " -q -o " +
+                                        killed + " --resume --max-evaluations 40");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.out;
+  // Each evaluation is numbered once, however the kill fell between the history and
+  // the state being written.
+  const std::string history = test::read_text(dir / "killed" / "history.csv");
+  std::set<int> numbers;
+  std::istringstream rows(history.substr(history.find('\n') + 1));
+  for (std::string row; std::getline(rows, row);)
+    EXPECT_TRUE(numbers.insert(std::stoi(row)).second) << "evaluation " << row << " twice";
+  const auto a = fitted_parameters(dir / "through" / "fit-state.yaml");
+  const auto b = fitted_parameters(dir / "killed" / "fit-state.yaml");
+  ASSERT_EQ(a.size(), b.size());
+  // The resumed L-BFGS starts without the curvature pairs it had: the same optimum, not
+  // the same path, so agreement is to the fit's own convergence (log parameters).
+  for (const auto& [label, value] : a)
+    EXPECT_NEAR(b.at(label), value, 2e-3) << label << " (killed at evaluation " << kill_at << ")";
+  EXPECT_TRUE(test::fs::exists(dir / "killed" / "fitted.yaml"));
 }
 
 }  // namespace
