@@ -21,6 +21,7 @@
 #include <sunmatrix/sunmatrix_sparse.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 
@@ -303,7 +304,7 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
 /// thousands of segments they would otherwise be the one part of the adjoint's
 /// memory that grows with the simulated time (7 MB on the 720-tet cylinder at 30 s
 /// in 0.05 s segments, against 11 MB for the whole forward run). In memory when no
-/// temporary file can be made.
+/// temporary file can be made, and from the state on which the disk is full.
 class BoundaryStates {
  public:
   explicit BoundaryStates(long n) : n_(n), file_(std::tmpfile()) {}
@@ -314,12 +315,16 @@ class BoundaryStates {
   BoundaryStates& operator=(const BoundaryStates&) = delete;
 
   void push(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
-    if (file_ && std::fseek(file_, 0, SEEK_END) == 0 &&
+    // Flushed at once, so that a full disk shows here and not when reading back.
+    if (file_ && memory_.empty() &&
+        std::fseek(file_, static_cast<long>(2 * in_file_ * n_ * sizeof(double)), SEEK_SET) ==
+            0 &&
         std::fwrite(x.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
-        std::fwrite(v.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_)) {
+        std::fwrite(v.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
+        std::fflush(file_) == 0) {
+      ++in_file_;
       return;
     }
-    if (file_) throw Error("could not write a segment boundary state to a temporary file");
     memory_.push_back(x);
     memory_.push_back(v);
   }
@@ -327,20 +332,23 @@ class BoundaryStates {
   void get(long k, Eigen::VectorXd& x, Eigen::VectorXd& v) {
     x.resize(n_);
     v.resize(n_);
-    if (!file_) {
-      x = memory_[2 * k];
-      v = memory_[2 * k + 1];
+    if (k >= in_file_) {
+      x = memory_[2 * (k - in_file_)];
+      v = memory_[2 * (k - in_file_) + 1];
       return;
     }
     if (std::fseek(file_, static_cast<long>(2 * k * n_ * sizeof(double)), SEEK_SET) != 0 ||
         std::fread(x.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_) ||
         std::fread(v.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_))
-      throw Error("could not read a segment boundary state back from its temporary file");
+      throw IoError(fmt::format(
+          "could not read segment boundary state {} back from the adjoint's temporary file ({})",
+          k, std::strerror(errno)));
   }
 
  private:
   long n_;
   std::FILE* file_;
+  long in_file_ = 0;  // states 0 … in_file_ − 1 are in the file, the rest in memory
   std::vector<Eigen::VectorXd> memory_;
 };
 

@@ -72,6 +72,8 @@ ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::Vect
         evaluate_adjoint(run, result);
         break;
     }
+  } catch (const IoError&) {
+    throw;
   } catch (const Error& e) {
     // Inadmissible trial parameters (e.g. no static equilibrium) fail this evaluation only.
     result.ok = false;

@@ -11,4 +11,11 @@ class Error : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// A failure of the machine (a disk that cannot be read back), not of the model:
+/// a fit ends on it instead of treating it as a failed trial of the parameters.
+class IoError : public Error {
+ public:
+  using Error::Error;
+};
+
 }  // namespace kelvin

@@ -447,5 +447,46 @@ TEST(FitCli, AFitKilledAtAnyEvaluationResumesToTheSameResult) {
   EXPECT_TRUE(test::fs::exists(dir / "killed" / "fitted.yaml"));
 }
 
+// A full disk at any output step (emulated by a file-size limit, whose writes fail
+// as ENOSPC would once SIGXFSZ is ignored): an error naming the file, no partial or
+// temporary file left, and the fit resumable from what was saved.
+TEST(FitCli, AFullDiskAtAnyOutputLeavesEveryFileWholeAndTheFitResumable) {
+  const path dir = cli_scenario("fit-full-disk");
+  const std::string out = (dir / "out").string();
+  const std::string fit = "fit " + (dir / "fit.yaml").string() + " -q -o " + out;
+  ASSERT_EQ(test::run_kelvin(fit + " --max-evaluations 2").exit_code, 0);
+  int failures = 0, evaluations = 2;
+  // Limits in KiB from below the smallest output to above the largest (the track plots).
+  for (const int kib : {1, 2, 3, 4, 8, 16, 32}) {
+    ++evaluations;
+    const std::string script = "trap \"\" XFSZ; ulimit -f " + std::to_string(kib) + "; " +
+                               KELVIN_BINARY + " " + fit + " --resume --max-evaluations " +
+                               std::to_string(evaluations) + " > " + out + ".log 2>&1";
+    const int status = std::system(("bash -c '" + script + "'").c_str());
+    const std::string log = test::read_text(out + ".log");
+    if (WEXITSTATUS(status) != 0) {
+      ++failures;
+      EXPECT_EQ(WEXITSTATUS(status), 2) << kib << " KiB: " << log;
+      EXPECT_NE(log.find("write failed"), std::string::npos) << kib << " KiB: " << log;
+      EXPECT_NE(log.find("File too large"), std::string::npos) << kib << " KiB: " << log;
+    }
+    // The adjoint's temporary file goes to memory once the disk is full: no trial fails.
+    EXPECT_EQ(log.find("simulation failed"), std::string::npos) << kib << " KiB: " << log;
+    for (const auto& f : test::fs::directory_iterator(dir / "out"))
+      EXPECT_EQ(f.path().filename().string().find(".tmp."), std::string::npos)
+          << kib << " KiB left " << f.path();
+    const FitState state = read_fit_state((dir / "out" / "fit-state.yaml").string());
+    EXPECT_EQ(history_rows(dir / "out" / "history.csv"), state.evaluations) << kib << " KiB";
+  }
+  EXPECT_GE(failures, 3);  // the small limits fail at different outputs
+  const auto finished = test::run_kelvin(fit + " --resume --max-evaluations " +
+                                         std::to_string(evaluations + 1));
+  ASSERT_EQ(finished.exit_code, 0) << finished.out;
+  EXPECT_EQ(read_fit_state((dir / "out" / "fit-state.yaml").string()).evaluations,
+            evaluations + 1);
+  const auto sim = test::run_kelvin("simulate " + out + "/fitted.yaml -q -o " + out + "/sim");
+  EXPECT_EQ(sim.exit_code, 0) << sim.out;
+}
+
 }  // namespace
 }  // namespace kelvin
