@@ -8,6 +8,7 @@
 #include "diagnose/diagnosis_outputs.hpp"
 #include "drivers/commands.hpp"
 #include "engine/error.hpp"
+#include "materials/crash_report.hpp"
 
 namespace kelvin {
 namespace {
@@ -26,6 +27,10 @@ int run(const DiagnoseArgs& args) {
     fmt::print(stderr, "error: {}\n", why);
     return kExitInputError;
   }
+  report_crashes(fmt::format("the stages done so far are in {}; continue with: kelvin diagnose "
+                             "{} -o {} --resume",
+                             outdir, args.scenario, outdir)
+                     .c_str());
   DiagnoseOptions o;
   o.resume = args.resume;
   o.max_evaluations = args.max_evaluations;

@@ -13,6 +13,7 @@
 #include "drivers/fit_state.hpp"
 #include "drivers/stiffness_scan.hpp"
 #include "engine/error.hpp"
+#include "materials/crash_report.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
@@ -68,6 +69,12 @@ int run(const FitArgs& args) {
     return kExitInputError;
   }
   const std::string state_path = (std::filesystem::path(outdir) / "fit-state.yaml").string();
+  // --max-evaluations 1 is spent already on resuming: the outputs come from the best.
+  report_crashes(fmt::format("the best parameters so far are in {} (saved after every "
+                             "evaluation); write fitted.yaml and the report from them with: "
+                             "kelvin fit {} -o {} --resume --max-evaluations 1",
+                             state_path, args.scenario, outdir)
+                     .c_str());
   const ParameterMap& map = problem->map();
 
   FitState state;

@@ -5,6 +5,7 @@
 #include "drivers/commands.hpp"
 #include "engine/error.hpp"
 #include "engine/simulation.hpp"
+#include "materials/crash_report.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
@@ -56,6 +57,7 @@ void register_simulate(CLI::App& app, int& exit_code) {
     if (!args->quiet)
       fmt::print("kelvin simulate: {} ({} nodes, {} tetrahedra) → {}\n", scenario.name,
                  scenario.mesh.num_nodes(), scenario.mesh.num_tets(), outdir);
+    report_crashes(fmt::format("the frames written so far are in {}", outdir).c_str());
     SimulationOptions options;
     options.outdir = outdir;
     options.interrupt = &g_interrupted;

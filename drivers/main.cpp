@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "drivers/commands.hpp"
+#include "materials/crash_report.hpp"
 
 namespace kelvin {
 std::atomic<bool> g_interrupted{false};
@@ -52,6 +53,7 @@ int main(int argc, char** argv) {
   kelvin::register_capture(app, exit_code);
   kelvin::register_diagnose(app, exit_code);
 
+  kelvin::report_crashes("");
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
   try {

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "engine/error.hpp"
+#include "materials/crash_report.hpp"
 #include "materials/plugin_abi.h"
 
 namespace kelvin {
@@ -66,7 +67,9 @@ std::string format_tensor(const double* a) {
 class PluginMaterial final : public Material {
  public:
   PluginMaterial(std::shared_ptr<Library> lib, const kelvin_material_desc* d)
-      : lib_(std::move(lib)), d_(d) {
+      : lib_(std::move(lib)),
+        d_(d),
+        who_("plugin material '" + std::string(d->name) + "' (" + lib_->path + ")") {
     for (int k = 0; k < d->num_params; ++k) {
       const kelvin_param_info& p = d->params[k];
       params_.push_back({p.name, p.unit ? p.unit : "", p.description ? p.description : "",
@@ -95,7 +98,9 @@ class PluginMaterial final : public Material {
     };
     char msg[512];
     msg[0] = '\0';
+    enter_plugin_call(who_.c_str(), in.element);
     const int status = d_->evaluate(&p, request, &r, msg, sizeof msg);
+    leave_plugin_call();
     if (status == KELVIN_INADMISSIBLE) return false;
     if (status != KELVIN_OK)
       throw Error(where(in) + " failed: " + (msg[0] ? std::string(msg) : "no message"));
@@ -124,6 +129,7 @@ class PluginMaterial final : public Material {
 
   std::shared_ptr<Library> lib_;
   const kelvin_material_desc* d_;
+  std::string who_;  // for the crash report
   std::vector<ParamInfo> params_;
   std::vector<double> state_;
 };

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Fuzzes one reader with libFuzzer: scripts/fuzz.sh TARGET SECONDS
+# Fuzzes one reader with libFuzzer: scripts/fuzz.sh TARGET SECONDS [RUNS]
 #   TARGET: scenario | gmsh | tetgen | csv | capture | fields
+#   stops after SECONDS, or after RUNS executions when given (e.g. 1000000)
 # Builds build-fuzz with clang (installed here when missing), seeds the corpus from
 # yaml/examples and tests/data, and runs for SECONDS. Inputs that crash, leak past
 # the limits or throw anything but kelvin's own error land in fuzz/crashers/TARGET/;
@@ -9,6 +10,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 target=${1:?target: scenario gmsh tetgen csv capture fields}
 seconds=${2:-60}
+runs=${3:--1}
 if ! command -v clang++ >/dev/null; then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   $SUDO apt-get install -y -qq --no-install-recommends clang >/dev/null
@@ -35,6 +37,6 @@ case $target in
   *) echo "unknown target $target" >&2; exit 1 ;;
 esac
 ASAN_OPTIONS=detect_leaks=0 UBSAN_OPTIONS=halt_on_error=1 \
-  "build-fuzz/bin/fuzz_${target}" "$corpus" -max_total_time="$seconds" -timeout=10 \
+  "build-fuzz/bin/fuzz_${target}" "$corpus" -max_total_time="$seconds" -runs="$runs" -timeout=10 \
   -rss_limit_mb=2048 -max_len=65536 -artifact_prefix="$crashers/" -print_final_stats=1 2>&1 |
   grep -E "^(stat::|#[0-9]+ *DONE|==[0-9]+==|SUMMARY|artifact_prefix|Test unit written)" || true

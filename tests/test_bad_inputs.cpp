@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -228,6 +229,56 @@ time: { end: 0.5 }
   EXPECT_TRUE(r.error.empty()) << r.error;
   EXPECT_FALSE(r.completed);
   EXPECT_TRUE(fs::exists(dir / "out" / "summary.txt"));
+}
+
+// A plugin that crashes cannot be survived in kelvin's process; the crash is named
+// (plugin, element), and the fit's state saved after every evaluation is kept.
+TEST(BadInputs, APluginThatCrashesInsideAFitIsNamedAndTheBestSoFarIsKept) {
+  const fs::path dir = test::scratch("plugin-crash");
+  const auto bar = [&](double mu, double crash_above, const std::string& tail) {
+    return fmt::format(R"(
+name: crash
+mesh: {{ generate: box, lo: [0, 0, 0], hi: [0.1, 0.02, 0.02], element_size: 0.01 }}
+material:
+  density: 1000
+  elastic: {{ model: segfault-model, plugin: {}, mu: {}, crash_above: {}, crash_element: 7 }}
+  viscous: {{ model: newtonian, nu: 5 }}
+gravity: [0, 0, -9.81]
+clamps:
+  - {{ name: wall, select: {{ plane: {{ axis: x, at: 0 }} }} }}
+markers:
+  rest:
+    - {{ name: tip, at: [0.1, 0.01, 0.01] }}
+time: {{ end: 0.05, output_rate: 1000 }}
+{})",
+                       KELVIN_MISBEHAVING_PLUGIN, mu, crash_above, tail);
+  };
+  const std::string tracks = test::simulate_tracks(dir, "truth", bar(2e5, 1e19, ""));
+  std::string fit_yaml =
+      bar(1e5, 1.5e5, "fit: { parameters: [elastic.mu], max_evaluations: 20 }\n");
+  fit_yaml.replace(fit_yaml.find("time:"), 0, "  observed: " + tracks + "\n");
+  test::write_text(dir / "fit.yaml", fit_yaml);
+  const std::string out = (dir / "out").string();
+  const auto r = run_kelvin("fit " + (dir / "fit.yaml").string() + " -o " + out);
+  EXPECT_EQ(r.exit_code, 128 + SIGSEGV) << r.out;
+  EXPECT_NE(r.out.find("kelvin: crashed (segmentation fault) inside plugin material "
+                       "'segfault-model' (" KELVIN_MISBEHAVING_PLUGIN ") at element 7"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("the best parameters so far are in " + out + "/fit-state.yaml"),
+            std::string::npos)
+      << r.out;
+  // The evaluations before the crash (μ below the crash) are saved, and the command
+  // the report prints writes the outputs from them without another trial.
+  const std::string state = test::read_text(dir / "out" / "fit-state.yaml");
+  EXPECT_EQ(state.find("evaluations: 0\n"), std::string::npos) << state;
+  const std::string again = "--resume --max-evaluations 1";
+  ASSERT_NE(r.out.find(again), std::string::npos) << r.out;
+  const auto outputs =
+      run_kelvin("fit " + (dir / "fit.yaml").string() + " -o " + out + " " + again);
+  EXPECT_EQ(outputs.exit_code, 0) << outputs.out;
+  EXPECT_TRUE(fs::exists(dir / "out" / "fitted.yaml"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "report.md"));
 }
 
 }  // namespace kelvin

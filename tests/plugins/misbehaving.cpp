@@ -1,5 +1,6 @@
-// Two models that break the contract: one returns NaN stress past a stretch, one
-// throws. kelvin must report the element and the state, never crash.
+// Models that break the contract: one returns NaN stress past a stretch, one
+// throws, one dereferences a null pointer. kelvin must report the element and the
+// state, and for the crash, which it cannot survive, say where and what is kept.
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -43,6 +44,34 @@ class ThrowingModel final : public Material {
   }
 };
 
+/// Linear spring P = μ (F − I) that crashes (SIGSEGV) at element `crash_element`
+/// once μ exceeds `crash_above`: a bug that shows only at some trial parameters.
+class SegfaultModel final : public Material {
+ public:
+  std::string name() const override { return "segfault-model"; }
+  const std::vector<ParamInfo>& params() const override {
+    static const std::vector<ParamInfo> p = {
+        {"mu", "Pa", "shear modulus", 1e4, 0, 1e300, true},
+        {"crash_above", "Pa", "mu beyond which the model crashes", 1e19, 0, 1e300, true},
+        {"crash_element", "1", "element at which it crashes", 0, 0, 1e9, false}};
+    return p;
+  }
+  bool is_viscous() const override { return false; }
+  bool evaluate(const MaterialPoint& in, unsigned request, MaterialResponse& out) const override {
+    if (in.q[0] > in.q[1] && in.element == static_cast<int>(in.q[2])) {
+      volatile double* null = nullptr;
+      *null = 1;
+    }
+    if (request & kStress) out.P = in.q[0] * (in.F - Mat3::Identity());
+    if (request & kTangent) out.dPdF = in.q[0] * Mat9::Identity();
+    if (request & kParamDerivative) {
+      out.dPdq.setZero(9, 3);
+      Eigen::Map<Mat3>(out.dPdq.data()) = in.F - Mat3::Identity();
+    }
+    return true;
+  }
+};
+
 }  // namespace
 
-KELVIN_EXPORT_MATERIALS(NanModel, ThrowingModel)
+KELVIN_EXPORT_MATERIALS(NanModel, ThrowingModel, SegfaultModel)
