@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <regex>
 #include <sstream>
@@ -471,6 +472,21 @@ TEST(FitState, RoundTripsExactlyWithTheToleranceScale) {
   }
   std::ofstream(path) << text;
   EXPECT_EQ(kelvin::read_fit_state(path).tolerance_scale, 1.0);
+
+  // Cut in the middle (a copy that ran out of disk): named as truncated, not "line 0".
+  kelvin::write_fit_state(path, s);
+  {
+    std::ifstream in(path);
+    const std::string whole((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(path) << whole.substr(0, whole.find("best_objective"));
+  }
+  try {
+    kelvin::read_fit_state(path);
+    ADD_FAILURE() << "a truncated state was accepted";
+  } catch (const kelvin::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find("line 0"), std::string::npos) << e.what();
+  }
 
   std::ofstream(path) << "scenario: [unclosed\n";
   try {

@@ -1,7 +1,8 @@
 // Models that break the contract: one returns NaN stress past a stretch, one
-// throws, one dereferences a null pointer. kelvin must report the element and the
+// throws, one writes to an unmapped address. kelvin must report the element and the
 // state, and for the crash, which it cannot survive, say where and what is kept.
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
 
@@ -59,8 +60,9 @@ class SegfaultModel final : public Material {
   bool is_viscous() const override { return false; }
   bool evaluate(const MaterialPoint& in, unsigned request, MaterialResponse& out) const override {
     if (in.q[0] > in.q[1] && in.element == static_cast<int>(in.q[2])) {
-      volatile double* null = nullptr;
-      *null = 1;
+      // An unmapped page, not null: UBSan would stop a null store before the fault.
+      volatile std::uintptr_t address = 64;
+      *reinterpret_cast<volatile double*>(address) = 1;
     }
     if (request & kStress) out.P = in.q[0] * (in.F - Mat3::Identity());
     if (request & kTangent) out.dPdF = in.q[0] * Mat9::Identity();
