@@ -66,6 +66,9 @@ struct RefitResult {
   double heldout_drop = 0;       // Σ (‖h₀‖² − ‖h‖²) (m²)
   double heldout_threshold = 0;  // z σ̂ ‖h − h₀‖·2: what noise alone could give
   bool passes_training = false, passes_heldout = false;
+  /// The refit ended above the nominal misfit (a local minimum, a budget spent far
+  /// out): reported at the nominal point, which every nested candidate contains.
+  bool at_nominal = false;
   std::string where;  // marker, or region of a field's largest change
   std::vector<NamedValue> parameters;
   /// The nominal parameters as refitted with the effect: what they had absorbed

@@ -220,7 +220,7 @@ std::string diagnosis_json(const Diagnosis& d) {
         "\"train_rms_before\": {}, \"train_rms_after\": {}, \"statistic\": {}, "
         "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
         "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
-        "\"passes_training\": {}, \"passes_heldout\": {}, \"where\": {}, "
+        "\"passes_training\": {}, \"passes_heldout\": {}, \"at_nominal\": {}, \"where\": {}, "
         "\"parameters\": {}, \"nominal_parameters\": {}, \"fitted\": {}}}",
         k ? "," : "", json_string(candidate_name(d, r.candidate)), r.ok ? "true" : "false",
         json_string(r.error), r.evaluations, json_number(d.nominal_train.rms),
@@ -228,8 +228,8 @@ std::string diagnosis_json(const Diagnosis& d) {
         json_number(r.bic), json_number(heldout_rms(r.heldout, false)),
         json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
         json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
-        r.passes_heldout ? "true" : "false", json_string(r.where), json_values(r.parameters),
-        json_values(r.nominal_parameters), json_string(r.fitted_yaml));
+        r.passes_heldout ? "true" : "false", r.at_nominal ? "true" : "false", json_string(r.where),
+        json_values(r.parameters), json_values(r.nominal_parameters), json_string(r.fitted_yaml));
   }
   j += "],\n  \"learned_correction\": ";
   if (d.learned < 0) {
@@ -572,6 +572,7 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
     std::string params;
     for (const auto& v : x.parameters)
       params += fmt::format("{}{} = {:.4g}", params.empty() ? "" : ", ", v.name, v.value);
+    if (x.at_nominal) params = "refit ended above the nominal; shown at the nominal: " + params;
     if (!x.ok) {
       fmt::format_to(out, "| {} | failed: {} | | | | | | |\n", candidate_name(d, x.candidate),
                      x.error);
