@@ -317,8 +317,7 @@ class BoundaryStates {
   void push(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
     // Flushed at once, so that a full disk shows here and not when reading back.
     if (file_ && memory_.empty() &&
-        std::fseek(file_, static_cast<long>(2 * in_file_ * n_ * sizeof(double)), SEEK_SET) ==
-            0 &&
+        std::fseek(file_, static_cast<long>(2 * in_file_ * n_ * sizeof(double)), SEEK_SET) == 0 &&
         std::fwrite(x.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
         std::fwrite(v.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
         std::fflush(file_) == 0) {
@@ -341,8 +340,8 @@ class BoundaryStates {
         std::fread(x.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_) ||
         std::fread(v.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_))
       throw IoError(fmt::format(
-          "could not read segment boundary state {} back from the adjoint's temporary file ({})",
-          k, std::strerror(errno)));
+          "could not read segment boundary state {} back from the adjoint's temporary file ({})", k,
+          std::strerror(errno)));
   }
 
  private:
