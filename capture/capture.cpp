@@ -5,12 +5,12 @@
 #include <cctype>
 #include <cerrno>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
 
 #include "capture/c3d_reader.hpp"
 #include "capture/motive_csv_reader.hpp"
 #include "engine/error.hpp"
+#include "engine/input_size.hpp"
 
 namespace kelvin {
 
@@ -22,9 +22,7 @@ std::string track_name(const std::string& label) {
 }
 
 Capture read_capture(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec))
-    throw Error(fmt::format("{}: is a directory, not a capture file", path));
+  check_data_file(path, "capture file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(fmt::format("{}: cannot open ({})", path, std::strerror(errno)));
   char head[2] = {0, 0};

@@ -649,15 +649,19 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     const std::vector<int> entries = entries_of(model, model.extended.candidate_specs[0]);
     res.dof = static_cast<int>(entries.size());
     const Eigen::VectorXd p0 = start(model, entries).cwiseMax(map.lower()).cwiseMin(map.upper());
+    // The nominal fit inside the extended model (the candidate at its nested value).
+    const auto nested_nominal = [&] {
+      Eigen::VectorXd p = map.initial();
+      p.head(n_nominal) = p_nominal;
+      return p;
+    };
     const double refit_ftol = precision(d.nominal_train.residual, d.noise.sigma);
     FitRun fit = fit_model(model, p0, (state / (name + ".csv")).string(), o, name, refit_ftol,
                            d.settings.refit_evaluations);
     if (!fit.ok && !stopped()) {
       // The linearised start may lie where the model cannot run: from the nominal.
-      Eigen::VectorXd p1 = map.initial();
-      p1.head(n_nominal) = p_nominal;
-      fit = fit_model(model, p1, (state / (name + ".csv")).string(), o, name, refit_ftol,
-                      d.settings.refit_evaluations);
+      fit = fit_model(model, nested_nominal(), (state / (name + ".csv")).string(), o, name,
+                      refit_ftol, d.settings.refit_evaluations);
     }
     res.evaluations = fit.evaluations;
     if (!fit.ok) {
@@ -675,8 +679,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
           fmt::format("  {}: the refit ended above the nominal (train rms {:.4f} mm against "
                       "{:.4f}); reported at the nominal point",
                       name, res.train.rms * 1e3, d.nominal_train.rms * 1e3));
-      fit.p = map.initial();
-      fit.p.head(n_nominal) = p_nominal;
+      fit.p = nested_nominal();
       res.train = d.nominal_train;
       res.at_nominal = true;
     }
