@@ -267,7 +267,7 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
       !s.material.fields_path.empty() ||
       std::any_of(s.fit.parameters.begin(), s.fit.parameters.end(),
                   [](const auto& p) { return p.scope == FitParameterSpec::Scope::PerElement; });
-  if (!per_element && s.mesh.refined < 3 && 8.0 * s.mesh.num_tets() <= 1.2e7) {
+  if (!per_element && s.mesh.refined < 3 && 8.0 * s.mesh.num_tets() <= kMaxMeshTets) {
     Candidate mesh;
     mesh.id = "discretisation";
     mesh.where = "mesh";

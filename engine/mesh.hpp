@@ -27,6 +27,11 @@ Mesh generate_box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double h
 /// centred on the axis, target element size `h`.
 Mesh generate_cylinder(double radius, double length, double h, int axis = 2);
 
+/// The number of tetrahedra generate_box / generate_cylinder would make, so that a
+/// caller can refuse a size before allocating it.
+double box_tet_count(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double h);
+double cylinder_tet_count(double radius, double length, double h);
+
 /// Reads Gmsh .msh (ASCII 4.1 or 2.2; physical tags become regions),
 /// TetGen (.node/.ele, given either file; the .ele attribute becomes the region).
 /// Throws kelvin::Error naming the file and line on malformed input.

@@ -19,6 +19,11 @@ int cells_along(double extent, double h) {
   return std::max(1, static_cast<int>(std::lround(extent / h)));
 }
 
+// A double: a hostile size overflows an int, never a comparison with a limit.
+double cells_along_d(double extent, double h) {
+  return std::max(1.0, std::round(extent / h));
+}
+
 void check_size(double h, const char* what) {
   if (!(h > 0) || !std::isfinite(h))
     throw Error(fmt::format("{}: element size must be positive", what));
@@ -26,14 +31,26 @@ void check_size(double h, const char* what) {
 
 }  // namespace
 
+double box_tet_count(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double h) {
+  double cells = 1;
+  for (int i = 0; i < 3; ++i) cells *= cells_along_d(hi[i] - lo[i], h);
+  return 6 * cells;
+}
+
+// A disk of nr rings holds 6 nr² triangles; each prism layer cuts them into 3 tetrahedra.
+double cylinder_tet_count(double radius, double length, double h) {
+  const double nr = std::max(2.0, cells_along_d(radius, h));
+  return 18 * nr * nr * cells_along_d(length, h);
+}
+
 Mesh generate_box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double h) {
   check_size(h, "box");
   if (!((hi - lo).array() > 0).all()) throw Error("box: every side must have positive length");
+  if (box_tet_count(lo, hi, h) > 1.2e8)
+    throw Error("box: element size too small (more than 1.2e8 tetrahedra)");
   Eigen::Array3i n;
   for (int i = 0; i < 3; ++i) n[i] = cells_along(hi[i] - lo[i], h);
   const long total_cells = static_cast<long>(n[0]) * n[1] * n[2];
-  if (total_cells > 20'000'000)
-    throw Error("box: element size too small (more than 1.2e8 tetrahedra)");
   Mesh m;
   m.source = fmt::format("generated box [{}, {}, {}]–[{}, {}, {}] h={}", lo[0], lo[1], lo[2], hi[0],
                          hi[1], hi[2], h);
@@ -78,8 +95,9 @@ Mesh generate_cylinder(double radius, double length, double h, int axis) {
   // Disk: concentric rings k = 1..nr of 6k nodes around a centre node, stitched
   // ring to ring by angle (near-equilateral triangles); then prisms over nz layers.
   // At least two rings: a single hexagon loses 17% of the disk area.
+  if (cylinder_tet_count(radius, length, h) > 3e8)
+    throw Error("cylinder: element size too small (more than 3e8 tetrahedra)");
   const int nr = std::max(2, cells_along(radius, h)), nz = cells_along(length, h);
-  if (6.0 * nr * nr * nz > 1e8) throw Error("cylinder: element size too small");
   std::vector<Eigen::Vector2d> disk{{0, 0}};
   std::vector<int> ring_start{0, 1};
   for (int k = 1; k <= nr; ++k) {

@@ -37,7 +37,7 @@ case $target in
   *) echo "unknown target $target" >&2; exit 1 ;;
 esac
 # A hang is an input still running after a minute: a valid scenario may generate a
-# mesh of millions of tetrahedra, which takes seconds (several times that under ASan).
+# mesh of up to 2 M tetrahedra, which takes seconds (several times that under ASan).
 ASAN_OPTIONS=detect_leaks=0 UBSAN_OPTIONS=halt_on_error=1 \
   "build-fuzz/bin/fuzz_${target}" "$corpus" -max_total_time="$seconds" -runs="$runs" -timeout=60 \
   -rss_limit_mb=2048 -max_len=65536 -artifact_prefix="$crashers/" -print_final_stats=1 2>&1 |

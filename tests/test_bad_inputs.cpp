@@ -141,6 +141,15 @@ TEST(BadInputs, ScenarioValuesOutOfReachAreNamedForWhatTheyAre) {
                    "name: " + std::string(100000, '[') + std::string(100000, ']') + "\n");
   expect_input_error("simulate " + (dir / "deep.yaml").string() + out,
                      "levels deep, the reader's limit");
+  // A valid 1 m cylinder at 1 cm is 3.7 M tetrahedra (found by the scenario fuzzer:
+  // seconds to build, more than a direct solve can hold).
+  test::write_text(dir / "bigmesh.yaml",
+                   bar_with_mesh("{ generate: cylinder, radius: 1.01, height: 0.2, "
+                                 "element_size: 0.01 }") +
+                       "time: { end: 0.01 }\n");
+  expect_input_error("simulate " + (dir / "bigmesh.yaml").string() + out,
+                     "mesh.element_size: 0.01 m would make 3.67e+06 tetrahedra, more than kelvin "
+                     "meshes (at most 2e+06)");
   test::write_text(dir / "meshdir.yaml",
                    bar_with_mesh("{ file: " + dir.string() + " }") + "time: { end: 0.01 }\n");
   expect_input_error("simulate " + (dir / "meshdir.yaml").string() + out,

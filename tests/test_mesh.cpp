@@ -122,6 +122,19 @@ TEST(GenerateCylinder, VolumeConvergesToPiR2L) {
   EXPECT_LT(previous_error, 0.005);  // h = r/8
 }
 
+// The counts a scenario checks before generating are the generators' own.
+TEST(GenerateMesh, TetCountsArePredictedExactly) {
+  for (double h : {0.5, 0.3, 0.07}) {
+    const Eigen::Vector3d lo(0, 0, 0), hi(1, 0.4, 2.2);
+    EXPECT_EQ(kelvin::box_tet_count(lo, hi, h), kelvin::generate_box(lo, hi, h).num_tets());
+    for (double r : {0.05, 0.31, 0.9})
+      EXPECT_EQ(kelvin::cylinder_tet_count(r, 1.3, h),
+                kelvin::generate_cylinder(r, 1.3, h, 2).num_tets())
+          << "r=" << r << " h=" << h;
+  }
+  EXPECT_GT(kelvin::cylinder_tet_count(1, 1, 1e-300), 1e300);  // no overflow to a small count
+}
+
 TEST(GenerateCylinder, GeometryAlongEachAxis) {
   for (int axis = 0; axis < 3; ++axis) {
     const Mesh m = kelvin::generate_cylinder(0.01, 0.2, 0.004, axis);

@@ -18,6 +18,10 @@
 
 namespace kelvin {
 
+/// The most tetrahedra a scenario may generate or refine to: a direct solve beyond
+/// this (over a million unknowns) would not fit a workstation's memory.
+constexpr double kMaxMeshTets = 2e6;
+
 /// One constitutive term (`elastic:` or `viscous:`): model name and parameter values.
 struct MaterialTermSpec {
   std::string model;                     // e.g. "neo-hookean", "newtonian", "power-law"

@@ -312,10 +312,17 @@ int axis_index(const Doc& d, const Node& n, const std::string& path) {
   return d.choice(n, path, {"x", "y", "z"})[0] - 'x';
 }
 
+void check_tet_count(const Doc& d, const Node& n, const std::string& path, double tets,
+                     const std::string& what) {
+  if (tets > kMaxMeshTets)
+    d.fail(n, path,
+           fmt::format("{} would make {:.3g} tetrahedra, more than kelvin meshes (at most {:.0e})",
+                       what, tets, kMaxMeshTets));
+}
+
 Mesh generate(const Doc& d, const Node& m) {
   const std::string kind =
       d.choice(d.required(m, "mesh", "generate"), "mesh.generate", {"box", "cylinder"});
-  const double kMaxCells = 2e6;  // beyond this the run would not fit a workstation
   if (kind == "box") {
     d.check_keys(m, "mesh", {"generate", "lo", "hi", "size", "element_size", "refine"});
     const double h = d.positive(d.required(m, "mesh", "element_size"), "mesh.element_size", "m");
@@ -344,12 +351,8 @@ Mesh generate(const Doc& d, const Node& m) {
                              "lo.{0} = {2:g})",
                              "xyz"[i], hi[i], lo[i]));
     }
-    const Eigen::Vector3d cells = ((hi - lo) / h).array().ceil();
-    if (cells.prod() > kMaxCells)
-      d.fail(m["element_size"], "mesh.element_size",
-             fmt::format("{:g} m would make about {:.3g} cells ({:g} × {:g} × {:g}); use a larger "
-                         "element size",
-                         h, cells.prod(), cells[0], cells[1], cells[2]));
+    check_tet_count(d, m["element_size"], "mesh.element_size", box_tet_count(lo, hi, h),
+                    fmt::format("{:g} m", h));
     return generate_box(lo, hi, h);
   }
   d.check_keys(m, "mesh", {"generate", "radius", "height", "element_size", "axis", "refine"});
@@ -357,11 +360,8 @@ Mesh generate(const Doc& d, const Node& m) {
   const double len = d.positive(d.required(m, "mesh", "height"), "mesh.height", "m");
   const double h = d.positive(d.required(m, "mesh", "element_size"), "mesh.element_size", "m");
   const int axis = m["axis"] ? axis_index(d, m["axis"], "mesh.axis") : 2;
-  const double cells = std::pow(std::ceil(2 * r / h), 2) * std::ceil(len / h);
-  if (cells > kMaxCells)
-    d.fail(
-        m["element_size"], "mesh.element_size",
-        fmt::format("{:g} m would make about {:.3g} cells; use a larger element size", h, cells));
+  check_tet_count(d, m["element_size"], "mesh.element_size", cylinder_tet_count(r, len, h),
+                  fmt::format("{:g} m", h));
   return generate_cylinder(r, len, h, axis);
 }
 
@@ -428,10 +428,6 @@ Mesh read_or_generate(const Doc& d, const Node& m) {
 
 }  // namespace
 
-namespace {
-constexpr double kMaxRefinedTets = 1.2e7;  // a box of kMaxCells cells, six tetrahedra each
-}  // namespace
-
 Mesh load_mesh(const Doc& d, const Node& m) {
   Mesh mesh = read_or_generate(d, m);
   if (const Node r = m["refine"]) {
@@ -443,11 +439,9 @@ Mesh load_mesh(const Doc& d, const Node& m) {
              fmt::format("{} levels: give 0 … 3 (each one multiplies the "
                          "tetrahedra by 8)",
                          levels));
-    const double tets = mesh.num_tets() * std::pow(8.0, static_cast<double>(levels));
-    if (tets > kMaxRefinedTets)
-      d.fail(r, "mesh.refine",
-             fmt::format("{} levels would make {:.3g} tetrahedra (at most {:.0e})", levels, tets,
-                         kMaxRefinedTets));
+    check_tet_count(d, r, "mesh.refine",
+                    mesh.num_tets() * std::pow(8.0, static_cast<double>(levels)),
+                    fmt::format("{} levels", levels));
     mesh = refine_uniformly(mesh, static_cast<int>(levels));
   }
   // The material (and its fields file) is read before the mesh, so whether the
