@@ -87,11 +87,13 @@ constexpr double kCoarseAccuracy = 0.1;
 constexpr double kStageRatio = 10;
 
 /// A stage is converged when its best Φ gained less than its accuracy (known after a
-/// hand-over) over the last kPlateauWindow evaluations, and a coarse stage, whose
+/// hand-over) over the last kPlateauWindow accepted moves, and a coarse stage, whose
 /// accuracy is only measured at the hand-over, when it gained less than
 /// kCoarsePlateauGain (the RMS then moves in its fourth digit). The bundled cylinder
 /// fit spent 6 evaluations on 0.2 % in Φ at 100× the scenario's tolerances, 4 on
-/// 0.03 % at 10× (accuracy 0.02 %), and ran into its 30-evaluation cap.
+/// 0.03 % at 10× (accuracy 0.02 %), and ran into its 30-evaluation cap. Rejected
+/// trials are the stall rule's (kMaxRejections): counted here, one three-trial
+/// backtrack read as convergence (V05's nominal fit stopped after 8 evaluations).
 constexpr int kPlateauWindow = 3;
 constexpr double kCoarsePlateauGain = 1e-3;
 
@@ -131,7 +133,7 @@ struct Context {
   // tighter); handover_objective is the best's value at the coarser stage.
   double accuracy = 0, handover_objective = NAN;
   bool probed = false;             // see probe_accuracy
-  std::vector<double> stage_best;  // the best objective after each evaluation of the stage
+  std::vector<double> stage_best;  // the best objective after each accepted move of the stage
   bool plateau = false;            // see kPlateauWindow
 };
 
@@ -334,7 +336,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     }
     c.rejected_in_row = r.accepted ? 0 : c.rejected_in_row + 1;
     c.outcome.history.push_back(r);
-    if (c.outcome.best.evaluation != 0) {
+    if (c.outcome.best.evaluation != 0 && r.accepted) {
       c.stage_best.push_back(c.outcome.best.objective);
       const size_t k = c.stage_best.size();
       if (k > kPlateauWindow) {
@@ -557,7 +559,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     if (plateau && !c.outcome.interrupted && !c.budget_spent) {
       gave_up = false;  // converged, not given up
       c.outcome.stop_reason =
-          fmt::format("converged: Φ improved by less than {} over the last {} evaluations",
+          fmt::format("converged: Φ improved by less than {} over the last {} accepted moves",
                       c.tolerance_scale > 1
                           ? fmt::format("{:g} %", 100 * kCoarsePlateauGain)
                           : fmt::format("its accuracy at the scenario's tolerances ({:.2g} %)",
