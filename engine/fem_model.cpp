@@ -409,6 +409,14 @@ Eigen::Matrix<double, 12, 12> FemModel::element_mass(int e) const {
   return M;
 }
 
+Eigen::Matrix<double, 3, 4> FemModel::element_mass_times(
+    int e, const Eigen::Matrix<double, 3, 4>& u) const {
+  // Consistent: M_ab = m/20 (1 + δ_ab) I₃, so (M u)_a = m/20 (u_a + Σ_b u_b); lumped m/4 u_a.
+  const double m = density_[e] * elements_[e].volume;
+  if (lumped_) return (m / 4) * u;
+  return (m / 20) * (u.colwise() + u.rowwise().sum());
+}
+
 void FemModel::expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
                       Eigen::Matrix3Xd& v) const {
   const int nn = mesh_.num_nodes();
@@ -553,9 +561,7 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
           if (er.mass_damping != 0) {
             Eigen::Matrix<double, 3, 4> ve;
             for (int a = 0; a < 4; ++a) ve.col(a) = v.col(el.nodes[a]);
-            const Eigen::Matrix<double, 12, 1> fm =
-                er.mass_damping * element_mass(e) * ve.reshaped();
-            fe += fm.reshaped(3, 4);
+            fe += er.mass_damping * element_mass_times(e, ve);
           }
         }
         Eigen::Matrix<double, 12, 12> Ke;
@@ -656,8 +662,7 @@ void FemModel::transpose_multiply(const ElementTangents& t, const double* lambda
     element_transpose_product(el, t.dPdFdot[e], le, product);
     dt = product;
     if (t.mass_damping[e] != 0) {
-      const Eigen::Matrix<double, 12, 1> m = t.mass_damping[e] * element_mass(e) * le.reshaped();
-      dt += m.reshaped(3, 4);
+      dt += t.mass_damping[e] * element_mass_times(e, le);
     }
   });
   gather(dof_ptr_, dof_src_, slots.vector_a.data(), Kt);

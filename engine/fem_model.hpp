@@ -214,6 +214,9 @@ class FemModel {
 
   /// 12×12 mass matrix of element e (dof order 3a + i), lumped or consistent.
   Eigen::Matrix<double, 12, 12> element_mass(int e) const;
+  /// element_mass(e) times the nodal values u (one column per node), in closed form:
+  /// mass-proportional damping applies it to every element at every residual.
+  Eigen::Matrix<double, 3, 4> element_mass_times(int e, const Eigen::Matrix<double, 3, 4>& u) const;
 
   /// Kinetic energy ½ vᵀ M v over all nodes (clamped included) for full velocities.
   double kinetic_energy(const Eigen::Matrix3Xd& v) const;

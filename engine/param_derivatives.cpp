@@ -117,7 +117,6 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
       evaluated[t] = resp.dPdq;
       dPdq[t] = &evaluated[t];
     }
-    const Vec12 ve_flat = ve.reshaped();
     for (int s = 0; s < static_cast<int>(slots_.size()); ++s) {
       const ParamSlot& slot = slots_[s];
       if (slot.is_clamp()) continue;  // below, face by face
@@ -132,7 +131,7 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
         // M_e is linear in ρ_e: ∂R/∂ρ_e = (M_e/ρ_e)(a − g + α₀ v), gravity being M g.
         Eigen::Matrix<double, 3, 4> rhs = ae + mass_damping * ve;
         rhs.colwise() -= model_.gravity();
-        dR = model_.element_mass(e) * rhs.reshaped() / model_.density()[e];
+        dR = (model_.element_mass_times(e, rhs) / model_.density()[e]).reshaped();
       } else {
         const Material& m = *terms[slot.term].model;
         Mat3 dP = Eigen::Map<const Mat3>(dPdq[slot.term]->col(slot.index).data());
@@ -147,7 +146,7 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
             dP += resp.P;
           }
         dR = (el.volume * dP * el.G).reshaped();
-        if (slot.index == m.mass_damping_param()) dR += model_.element_mass(e) * ve_flat;
+        if (slot.index == m.mass_damping_param()) dR += model_.element_mass_times(e, ve).reshaped();
       }
       visit(e, s, dR);
     }

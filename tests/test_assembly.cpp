@@ -147,6 +147,25 @@ TEST_P(JacobianTest, NewtonMatrixMatchesFiniteDifferencesOfTheResidual) {
 // Where S's symmetric part is not positive definite (here: a slender bar squeezed
 // to 60 % of its length, far past buckling, at a tiny c_j) KLU factorises S itself
 // and the solve is exactly the Newton matrix's.
+// The closed-form product that mass-proportional damping uses is the element mass
+// matrix's, lumped and consistent.
+TEST(ElementMass, ClosedFormProductMatchesTheMatrix) {
+  const Mesh mesh = generate_box({0, 0, 0}, {0.03, 0.02, 0.01}, 0.01);
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u01(500, 1500);
+  Eigen::VectorXd rho(mesh.num_tets());
+  for (auto& r : rho) r = u01(rng);
+  for (bool lumped : {false, true}) {
+    const FemModel model(mesh, materials(mesh.num_tets(), false), rho, {0, 0, -9.81}, {}, lumped);
+    for (int e = 0; e < mesh.num_tets(); e += 5) {
+      const Eigen::Matrix<double, 3, 4> v = Eigen::Matrix<double, 3, 4>::Random();
+      const Eigen::Matrix<double, 12, 1> expected = model.element_mass(e) * v.reshaped();
+      const Eigen::Matrix<double, 12, 1> got = model.element_mass_times(e, v).reshaped();
+      EXPECT_LT((got - expected).norm(), 1e-14 * expected.norm()) << "element " << e;
+    }
+  }
+}
+
 TEST(SchurSolver, AnIndefiniteNewtonMatrixFallsBackToLU) {
   Mesh mesh = generate_box({0, 0, 0}, {0.2, 0.01, 0.01}, 0.005);
   NodeSelection sel;
