@@ -15,13 +15,14 @@ void orient_positive(Mesh& m) {
     if (tet_volume(m, e) < 0) std::swap(m.tets(2, e), m.tets(3, e));
 }
 
-int cells_along(double extent, double h) {
-  return std::max(1, static_cast<int>(std::lround(extent / h)));
-}
-
 // A double: a hostile size overflows an int, never a comparison with a limit.
 double cells_along_d(double extent, double h) {
   return std::max(1.0, std::round(extent / h));
+}
+
+/// For sizes the tet-count checks have bounded.
+int cells_along(double extent, double h) {
+  return static_cast<int>(cells_along_d(extent, h));
 }
 
 void check_size(double h, const char* what) {
