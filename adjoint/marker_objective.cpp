@@ -147,22 +147,39 @@ void MarkerObjective::set_observation_vector(const Eigen::VectorXd& theta) {
   set_observation(p);
 }
 
-bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar,
-                               Eigen::Vector3d* rate) const {
+bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate,
+                               double* presence, double* presence_rate) const {
+  if (presence) *presence = 1;
+  if (presence_rate) *presence_rate = 0;
   if (t < t0_ || t > t1_ || times_.size() < 2 || t < times_.front() || t > times_.back())
     return false;
   // Left-continuous: a time equal to a frame belongs to the interval ending there.
   size_t k = std::lower_bound(times_.begin(), times_.end(), t) - times_.begin();
   k = k == 0 ? 0 : k - 1;
   if (!track_[i].col(k).allFinite() || !track_[i].col(k + 1).allFinite()) return false;
-  // The clock offset moves where the run's spline is read, not whether the marker
-  // counts: past the run's ends its end pieces continue (smoothly, for small τ).
   const double s = t + obs_.clock_offset;
   if (obs_.clock_offset != 0) {
+    // A shifted clock reads the run seen around t, never across a gap. Past the run's
+    // ends its tangent continues and the residual's weight falls smoothly to 0 within
+    // one frame interval: the end cubics of noisy tracks, extrapolated 3.6 frames for
+    // V09's 20 ms lag, had put the fit's misfit at 22 ms above the one at 0.
     const int first = run_first_[i][k], last = run_last_[i][k];
+    const double begin = times_[first], finish = times_[last];
+    if (s < begin || s > finish) {
+      const bool after = s > finish;
+      const int end = after ? last : first;
+      const double h = after ? finish - times_[last - 1] : times_[first + 1] - begin;
+      const double q = (after ? s - finish : begin - s) / h;
+      if (q >= 1) return false;
+      if (presence) *presence = 1 - q * q * (3 - 2 * q);
+      if (presence_rate) *presence_rate = 6 * q * (q - 1) / h * (after ? 1 : -1);
+      const auto slope = slopes_[i].col(end);
+      xbar = track_[i].col(end) + slope * (s - times_[end]);
+      if (rate) *rate = slope;
+      return true;
+    }
     const size_t j = std::lower_bound(times_.begin(), times_.end(), s) - times_.begin();
-    k = static_cast<size_t>(
-        std::clamp(static_cast<int>(j == 0 ? 0 : j - 1), first, std::max(first, last - 1)));
+    k = static_cast<size_t>(std::clamp(static_cast<int>(j == 0 ? 0 : j - 1), first, last - 1));
   }
   const double h = times_[k + 1] - times_[k], u = (s - times_[k]) / h;
   const auto a = track_[i].col(k), b = track_[i].col(k + 1);
@@ -182,10 +199,10 @@ Eigen::Vector4d MarkerObjective::weights(int i, const FemModel& model) const {
 }
 
 bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
-                                  Eigen::Vector3d& simulated,
-                                  Eigen::Vector3d& observed_position) const {
+                                  Eigen::Vector3d& simulated, Eigen::Vector3d& observed_position,
+                                  double* presence) const {
   Eigen::Vector3d xbar;
-  if (!observed(i, t, xbar)) return false;
+  if (!observed(i, t, xbar, nullptr, presence)) return false;
   const Eigen::Vector4d w = weights(i, model);
   simulated.setZero();
   for (int a = 0; a < 4; ++a) simulated += w[a] * x.col(model.mesh().tets(a, embedding_[i].tet));
@@ -199,21 +216,25 @@ bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const 
 void MarkerObjective::integrand(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                                 double* g) const {
   Eigen::Vector3d xs, xo;
+  double c;
   for (int i = 0; i < num_markers(); ++i)
-    g[i] = marker_pair(i, t, model, x, xs, xo) ? 0.5 * weight_[i] * (xs - xo).squaredNorm() : 0.0;
+    g[i] = marker_pair(i, t, model, x, xs, xo, &c)
+               ? 0.5 * weight_[i] * (c * (xs - xo)).squaredNorm()
+               : 0.0;
 }
 
 void MarkerObjective::add_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                                    double* grad) const {
   Eigen::Vector3d xs, xo;
+  double c;
   for (int i = 0; i < num_markers(); ++i) {
-    if (!marker_pair(i, t, model, x, xs, xo)) continue;
-    const Eigen::Vector3d r = weight_[i] * (xs - xo);
+    if (!marker_pair(i, t, model, x, xs, xo, &c)) continue;
+    const Eigen::Vector3d r = weight_[i] * c * c * (xs - xo);
     const Eigen::Vector4d w = weights(i, model);
     for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 3; ++c) {
-        const int d = model.dof(model.mesh().tets(a, embedding_[i].tet), c);
-        if (d >= 0) grad[d] += w[a] * r[c];
+      for (int k = 0; k < 3; ++k) {
+        const int d = model.dof(model.mesh().tets(a, embedding_[i].tet), k);
+        if (d >= 0) grad[d] += w[a] * r[k];
       }
   }
 }
@@ -223,7 +244,8 @@ Eigen::Matrix3Xd MarkerObjective::pair_jacobian(int i, double t, const FemModel&
   const int nm = num_markers();
   Eigen::Matrix3Xd J = Eigen::Matrix3Xd::Zero(3, num_observation_parameters());
   Eigen::Vector3d xbar, rate;
-  if (!observed(i, t, xbar, &rate)) return J;
+  double c, dc;
+  if (!observed(i, t, xbar, &rate, &c, &dc)) return J;
   Eigen::Matrix3d R, Jr;
   rotation_and_jacobian(obs_.rotation, R, Jr);
   J.col(0) = -R * rate;  // ∂x̄'/∂τ = R dx̄/dt
@@ -235,6 +257,12 @@ Eigen::Matrix3Xd MarkerObjective::pair_jacobian(int i, double t, const FemModel&
   // ∂(R v)/∂ω = −R [v]× J_r, v = x̄ − c; ∂x̄'/∂d = I.
   J.middleCols<3>(1 + 3 * nm) = R * skew(xbar - centroid_) * Jr;
   J.middleCols<3>(4 + 3 * nm) = -Eigen::Matrix3d::Identity();
+  if (c == 1 && dc == 0) return J;
+  // The counted residual c (x* − x̄'): its weight moves with τ too.
+  Eigen::Vector3d xs, xo;
+  marker_pair(i, t, model, x, xs, xo);
+  J *= c;
+  J.col(0) += dc * (xs - xo);
   return J;
 }
 
@@ -243,9 +271,10 @@ void MarkerObjective::observation_gradient(double t, const FemModel& model,
   Eigen::Map<Eigen::VectorXd> g(out, num_observation_parameters());
   g.setZero();
   Eigen::Vector3d xs, xo;
+  double c;
   for (int i = 0; i < num_markers(); ++i) {
-    if (!marker_pair(i, t, model, x, xs, xo)) continue;
-    g += pair_jacobian(i, t, model, x).transpose() * (weight_[i] * (xs - xo));
+    if (!marker_pair(i, t, model, x, xs, xo, &c)) continue;
+    g += pair_jacobian(i, t, model, x).transpose() * (weight_[i] * c * (xs - xo));
   }
 }
 

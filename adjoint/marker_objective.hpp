@@ -7,6 +7,10 @@
 /// Interval rule for occlusion: marker i contributes on [t_k, t_k+1] only when it was seen in both
 /// frames k and k+1; elsewhere (and outside the frames' span) its integrand is zero, never an
 /// extrapolation. One quadrature component per marker, so per-marker errors come for free.
+/// A clock offset reads each run's spline at t + τ; where that falls past the run's
+/// ends, the residual counts with a weight c that falls smoothly from 1 to 0 within
+/// one frame interval (the counted residual is c (x* − x̄)), so Φ stays smooth in τ
+/// and never compares with a track extrapolated far past what was seen.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -57,17 +61,20 @@ class MarkerObjective {
   /// θ as a vector and back (the layout above).
   Eigen::VectorXd observation_vector() const;
   void set_observation_vector(const Eigen::VectorXd& theta);
-  /// ∂(Σᵢ gᵢ)/∂θ at t, written to out (num_observation_parameters() entries). The
-  /// times a marker counts at are those of the unshifted capture, so Φ is smooth in τ.
+  /// ∂(Σᵢ gᵢ)/∂θ at t, written to out (num_observation_parameters() entries), the
+  /// residual weight's dependence on τ included.
   void observation_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                             double* out) const;
-  /// Marker i's simulated position (its offset applied) and the observed one as the
-  /// model sees it at t; false when it does not count at t.
+  /// Marker i's simulated position (its offset applied), the observed one as the
+  /// model sees it at t and, on request, the weight c ∈ (0, 1] of its residual (below
+  /// 1 only where a clock offset reads past the ends of the run seen around t); false
+  /// when it does not count at t.
   bool marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
-                   Eigen::Vector3d& simulated, Eigen::Vector3d& observed) const;
+                   Eigen::Vector3d& simulated, Eigen::Vector3d& observed,
+                   double* presence = nullptr) const;
 
-  /// d(x*ᵢ − x̄'ᵢ)/dθ at t (3 × num_observation_parameters()), zero where marker i
-  /// does not count: what the Gauss–Newton system needs beside d x*/dp.
+  /// d(c (x*ᵢ − x̄'ᵢ))/dθ at t (3 × num_observation_parameters()), zero where marker i
+  /// does not count: what the Gauss–Newton system needs beside c d x*/dp.
   Eigen::Matrix3Xd pair_jacobian(int i, double t, const FemModel& model,
                                  const Eigen::Matrix3Xd& x) const;
   /// Barycentric weights of marker i with its offset applied, and its tet.
@@ -85,8 +92,10 @@ class MarkerObjective {
 
  private:
   /// Observed position of marker i at t in the capture's own frame and clock, and
-  /// on request its time derivative; false when unobserved there.
-  bool observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate = nullptr) const;
+  /// on request its time derivative and the residual's weight c with dc/dτ; false
+  /// when unobserved there.
+  bool observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate = nullptr,
+                double* presence = nullptr, double* presence_rate = nullptr) const;
   std::vector<std::string> names_;
   std::vector<MarkerEmbedding> embedding_;
   std::vector<double> weight_, weighted_time_;

@@ -29,7 +29,10 @@ Eigen::MatrixXd residual_sensitivities(const FemModel& model, const MarkerObject
   const int nm = objective.num_markers();
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(3 * nm, sx.cols());
   for (int i = 0; i < nm; ++i) {
-    const Eigen::Vector4d w = objective.weights(i, model);
+    Eigen::Vector3d xs, xo;
+    double presence = 1;  // stays 1 where the marker does not count
+    objective.marker_pair(i, t, model, x, xs, xo, &presence);
+    const Eigen::Vector4d w = presence * objective.weights(i, model);
     for (int a = 0; a < 4; ++a) {
       const int node = model.mesh().tets(a, objective.tet(i));
       for (int c = 0; c < 3; ++c)
@@ -93,9 +96,11 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
       out.positions.push_back(marker_positions(model.mesh(), markers, x));
       Eigen::Matrix3Xd r(3, objective.num_markers());
       Eigen::Vector3d xs, xo;
+      double presence;
       for (int i = 0; i < objective.num_markers(); ++i)
-        r.col(i) = objective.marker_pair(i, t, model, x, xs, xo) ? Eigen::Vector3d(xs - xo)
-                                                                 : Eigen::Vector3d::Constant(NAN);
+        r.col(i) = objective.marker_pair(i, t, model, x, xs, xo, &presence)
+                       ? Eigen::Vector3d(presence * (xs - xo))
+                       : Eigen::Vector3d::Constant(NAN);
       out.residuals.push_back(r);
       if (!with_sensitivities) continue;
       for (size_t j = 0; j < entries.size(); ++j) {
