@@ -132,6 +132,27 @@ const std::vector<std::pair<std::string, std::string>>& unavailable_candidates()
   return u;
 }
 
+Candidate custom_candidate(const CustomCandidateSpec& spec) {
+  Candidate c;
+  c.id = spec.id;
+  c.where = spec.where;
+  c.description = spec.description.empty() ? "the user's candidate " + spec.id : spec.description;
+  c.origin = spec.place;
+  c.extend = [spec](const Candidate&, ModelEdits& m, YAML::Node& params, bool) {
+    int k = -1;
+    if (!spec.kind.empty())
+      k = append(spec.kind == "elastic" ? m.elastic : m.viscous, YAML::Clone(spec.term));
+    for (const auto& entry : spec.parameters) {
+      YAML::Node e = YAML::Clone(entry);
+      const std::string target = e["target"].Scalar();
+      if (target.rfind("term.", 0) == 0)
+        e["target"] = fmt::format("{}[{}].{}", spec.kind, k, target.substr(5));
+      params.push_back(e);
+    }
+  };
+  return c;
+}
+
 std::vector<Candidate> builtin_candidates(const Scenario& s) {
   std::vector<Candidate> out;
   const int axis = body_axis(s).axis;

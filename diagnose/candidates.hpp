@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "diagnose/diagnose_settings.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
@@ -31,6 +32,8 @@ struct Candidate {
   /// false: no parameters of its own (the discretisation); judged by one run at the
   /// nominal fit instead of the score, and refitted with the nominal parameters.
   bool screened = true;
+  /// Where the user defined it (diagnose.custom, "file:line:col: key"); "" if built in.
+  std::string origin;
   /// The fibre direction a refit of the anisotropy starts from (screening picks it).
   Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
   /// Adds the candidate's terms to `material` and its parameter entries (mappings)
@@ -61,6 +64,9 @@ double largest_modulus(const Scenario& scenario);
 /// Newtonian term, a marker offset an observed marker), in a fixed order, those not
 /// screened (Candidate::screened) last.
 std::vector<Candidate> builtin_candidates(const Scenario& scenario);
+
+/// The user's candidate of diagnose.custom (screened and refitted like a built-in one).
+Candidate custom_candidate(const CustomCandidateSpec& spec);
 
 /// Identifiers the diagnosis knows, for the `diagnose.candidates` check ("unnamed",
 /// the learned correction of diagnose/learned_correction, is not screened: it is

@@ -2,10 +2,24 @@
 /// \file
 /// The `diagnose:` section of a scenario (yaml/SCHEMA.md): which candidates, how
 /// many refits, the significance level and the held-out motions.
+#include <yaml-cpp/yaml.h>
+
 #include <string>
 #include <vector>
 
 namespace kelvin {
+
+/// A candidate effect of the user's (`diagnose.custom`): at most one material term
+/// added to the nominal ones and the fit entries of its parameters, written into each
+/// extended model like a built-in candidate. It must be nested: at its entries' start
+/// values the model is the nominal one (the diagnosis checks this with one run).
+struct CustomCandidateSpec {
+  std::string id, description, where;
+  std::string kind;       // "elastic", "viscous", or "" (no term: a field or observation)
+  YAML::Node term;        // the added term's mapping (its plugin path made absolute)
+  YAML::Node parameters;  // fit entries; a target `term.<p>` names the added term's p
+  std::string place;      // "file:line:col: diagnose.custom[i]", for messages about it
+};
 
 /// The missing-force field of the "where" stage (diagnose/missing_force.hpp).
 struct MissingForceSettings {
@@ -29,6 +43,7 @@ struct DiagnoseSettings {
   int refit_evaluations = 40;
   double alpha = 0.01;                // family-wise significance level
   std::vector<std::string> validate;  // held-out scenario files (absolute)
+  std::vector<CustomCandidateSpec> custom;
   MissingForceSettings missing_force;
 };
 

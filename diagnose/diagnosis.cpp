@@ -303,6 +303,47 @@ void predict_heldout_drops(Diagnosis& d, const std::vector<int>& order,
                              d.predicted_heldout_drop[c] * 1e6));
 }
 
+/// A candidate of the user's must make a scenario kelvin accepts, and be nested: at its
+/// entries' start values its model must put the tracks where the nominal model does
+/// (within what noise could explain at level `alpha`), or every score and refit
+/// measured against the nominal fit would be wrong. Errors name its entry.
+void check_custom_candidate(const Candidate& cand, const Scenario& nominal, FitProblem& base,
+                            const Eigen::VectorXd& p, double alpha, const fs::path& models,
+                            const DiagnoseOptions& o) {
+  Model model;
+  try {
+    model =
+        load_model(nominal.path, nominal, {&cand}, false, (models / (cand.id + ".yaml")).string());
+  } catch (const Error& e) {
+    throw Error(fmt::format("{}: its extended model ({}) is refused: {}", cand.origin,
+                            (models / (cand.id + ".yaml")).string(), e.what()));
+  }
+  const ParameterMap& map = model.problem->map();
+  Eigen::VectorXd q = map.initial();
+  q.head(p.size()) = p;
+  const MisfitFigures before = misfit(base, p, o.interrupt),
+                      after = misfit(*model.problem, q, o.interrupt);
+  if (!before.ok) throw Error(fmt::format("the nominal model does not run: {}", before.error));
+  if (!after.ok)
+    throw Error(fmt::format("{}: its model does not run at its start values: {}", cand.origin,
+                            after.error));
+  if (after.residual.size() != before.residual.size())
+    throw Error(fmt::format("{}: its model sees other samples than the nominal's", cand.origin));
+  const double sigma = estimate_noise(before.residual, before.entries).sigma;
+  const double moved = (after.residual - before.residual).squaredNorm() / (sigma * sigma),
+               threshold = chi_square_quantile(alpha, 1);
+  if (o.progress)
+    o.progress(
+        fmt::format("  {}: at its start values the tracks move by {:.3g}σ̂² (nested below {:.3g})",
+                    cand.id, moved, threshold));
+  if (moved > threshold)
+    throw Error(fmt::format(
+        "{}: is not nested in the nominal model: at its start values it moves the tracks by "
+        "{:.4g}σ̂² (noise could explain {:.3g}); start its parameters where the effect "
+        "vanishes (a modulus or coefficient at 0, a multiplier at 1)",
+        cand.origin, moved, threshold));
+}
+
 }  // namespace
 
 Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
@@ -326,11 +367,19 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                     "and, optionally, fit.experiments)",
                     d.scenario));
   const BodyAxis axis = body_axis(nominal);
+  const auto wanted = [&](const Candidate& c) {
+    return d.settings.candidates.empty() ||
+           std::find(d.settings.candidates.begin(), d.settings.candidates.end(), c.id) !=
+               d.settings.candidates.end();
+  };
   for (auto& c : builtin_candidates(nominal))
-    if (d.settings.candidates.empty() ||
-        std::find(d.settings.candidates.begin(), d.settings.candidates.end(), c.id) !=
-            d.settings.candidates.end())
-      d.candidates.push_back(c);
+    if (wanted(c)) d.candidates.push_back(c);
+  // The user's candidates are screened: they go before the model checks.
+  auto screened_end = std::find_if(d.candidates.begin(), d.candidates.end(),
+                                   [](const Candidate& c) { return !c.screened; });
+  for (const auto& spec : d.settings.custom)
+    if (const Candidate c = custom_candidate(spec); wanted(c))
+      screened_end = d.candidates.insert(screened_end, c) + 1;
   if (d.candidates.empty())
     throw Error(
         fmt::format("{}: diagnose.candidates: none of them applies to this scenario", d.scenario));
@@ -354,6 +403,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   Eigen::VectorXd p_start = base_map.initial();
   const bool resumable =
       o.resume && load_parameters(nominal_state, base_map).size() == base_map.size();
+  // Before any fit, so that a user's candidate that cannot be used costs little.
+  for (const auto& c : d.candidates)
+    if (!c.origin.empty() && !stopped() && !resumable)
+      check_custom_candidate(c, nominal, *base.problem, p_start, d.settings.alpha / m, models, o);
   // A nominal fit in the wrong basin of Φ names the wrong effect (V05: ×1.67 of the
   // moduli where the truth's homogeneous fit lies at ×0.4; the refits start there).
   if (nominal.fit.start_scan != "none" && !resumable) {
@@ -699,6 +752,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       res.where = field_region(model, fit.p, nominal, cand.id == "added_mass", axis);
     else if (cand.id == "clamp_compliance")  // where the pads are, by construction
       res.where = cand.where.empty() ? "clamp zone" : "clamp zone (" + cand.where + ")";
+    else if (!cand.origin.empty())  // the user's word for where the effect acts
+      res.where = cand.where;
     const fs::path dir = out / "refits" / name;
     model.problem->map().apply(fit.p, model.problem->experiment(0).model());
     res.fitted_yaml = write_fitted_scenario(*model.scenario, map,

@@ -105,6 +105,37 @@ TEST(DiagnoseSettings, BadEntriesAreRefusedWithTheirPlace) {
   const DiagnoseSettings w = load_diagnose_settings((dir / "with.yaml").string());
   EXPECT_TRUE(w.learned_correction);
   EXPECT_EQ(w.candidates, std::vector<std::string>{"drag"});
+
+  // The user's candidates: an identifier of their own, one term at most, parameters
+  // to fit; `term.<p>` names the added term's parameter.
+  const std::string fibre = "      elastic: { model: fibre, k: 0, theta: 0, phi: 0 }\n";
+  const std::string k = "      parameters: [ { target: term.k, lower: 0 } ]\n";
+  EXPECT_NE(refusal("  custom:\n    - id: Fibres\n" + fibre + k)
+                .find("diagnose.custom[0].id: 'Fibres' is not an identifier"),
+            std::string::npos);
+  EXPECT_NE(refusal("  custom:\n    - id: drag\n" + fibre + k).find("'drag' is taken"),
+            std::string::npos);
+  EXPECT_NE(refusal("  custom:\n    - id: a\n" + fibre + k + "    - id: a\n" + fibre + k)
+                .find("diagnose.custom[1].id: 'a' is taken"),
+            std::string::npos);
+  EXPECT_NE(
+      refusal("  custom:\n    - id: a\n" + fibre + "      viscous: { model: drag, c: 0 }\n" + k)
+          .find("not both"),
+      std::string::npos);
+  EXPECT_NE(refusal("  custom:\n    - id: a\n" + k).find("diagnose.custom[0].parameters[0].target"),
+            std::string::npos);
+  EXPECT_NE(refusal("  custom:\n    - id: a\n" + fibre + "      parameters: []\n").find("is empty"),
+            std::string::npos);
+  EXPECT_NE(refusal("  custom:\n    - id: a\n" + fibre).find("parameters"), std::string::npos);
+  test::write_text(dir / "custom.yaml", "name: s\ndiagnose:\n  custom:\n    - id: fibres_x\n" +
+                                            fibre + k + "  candidates: [drag, fibres_x]\n");
+  const DiagnoseSettings c = load_diagnose_settings((dir / "custom.yaml").string());
+  ASSERT_EQ(c.custom.size(), 1u);
+  EXPECT_EQ(c.custom[0].id, "fibres_x");
+  EXPECT_EQ(c.custom[0].kind, "elastic");
+  EXPECT_NE(c.custom[0].place.find("custom.yaml:4:7: diagnose.custom[0]"), std::string::npos)
+      << c.custom[0].place;
+  EXPECT_EQ(c.candidates, (std::vector<std::string>{"drag", "fibres_x"}));
 }
 
 const std::string kNominal = R"(  density: 1100
@@ -361,6 +392,56 @@ TEST(Diagnosis, FindsNoEffectWhereThereIsNone) {
   EXPECT_LT(d.missing_force.statistic, d.missing_force.threshold);
   // Nor is the nominal residual above the noise: no learned correction is fitted.
   EXPECT_EQ(d.learned, -1);
+}
+
+/// A candidate of the user's: fibres along the bar (x), their stiffness fitted from 0.
+std::string fibres_along_x(double k) {
+  return fmt::format(R"(  missing_force: false
+  custom:
+    - id: fibres_along_x
+      description: fibres along the bar
+      where: whole body
+      elastic: {{ model: fibre, k: {}, theta: 1.5707963267948966, phi: 0 }}
+      parameters: [ {{ target: term.k, lower: 0 }} ]
+)",
+                     k);
+}
+
+// The user names an effect of their own in diagnose.custom; the data hold it, and the
+// diagnosis names it beside the built-in candidates, with the user's place. A
+// candidate that does not contain the nominal model is refused before any fit.
+TEST(Diagnosis, NamesTheUsersOwnCandidate) {
+  const fs::path dir = test::scratch("diagnosis-custom");
+  const std::string truth = R"(  density: 1100
+  elastic:
+    - { model: neo-hookean, lambda: 2.0e5, mu: 0.8e5 }
+    - { model: fibre, k: 1.0e5, theta: 1.5707963267948966, phi: 0 }
+  viscous: { model: newtonian, nu: 30 })";
+  const fs::path scenario =
+      diagnosis_case(dir, truth, 19, "drag, sync_lag, fibres_along_x", fibres_along_x(0));
+  const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), {});
+  write_diagnosis_outputs(d);
+  EXPECT_EQ(d.effect, "fibres_along_x");
+  ASSERT_GE(d.accepted, 0);
+  const RefitResult& a = d.refits[d.accepted];
+  ASSERT_FALSE(d.verdict_where.empty());
+  EXPECT_EQ(d.verdict_where[0], "whole body");
+  ASSERT_EQ(a.parameters.size(), 1u);
+  EXPECT_NEAR(a.parameters[0].value, 1.0e5, 0.05e5);
+  EXPECT_LT(a.train.rms, 1.3 * d.noise.sigma);
+  ASSERT_EQ(a.heldout.size(), 1u);
+  EXPECT_LT(a.heldout[0].after.rms, 1.3 * d.noise.sigma);
+
+  const fs::path bad = diagnosis_case(test::scratch("diagnosis-custom-bad"), truth, 19,
+                                      "fibres_along_x", fibres_along_x(2e4));
+  try {
+    run_diagnosis(bad.string(), (bad.parent_path() / "out").string(), {});
+    ADD_FAILURE() << "a candidate that moves the nominal tracks was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("diagnose.custom[0]: is not nested"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("train.yaml:"), std::string::npos) << e.what();
+  }
 }
 
 // Tracks of the same material on a finer mesh (each tetrahedron split into eight):
