@@ -87,8 +87,8 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
   const std::string P = "diagnose";
   d.require_map(n, P);
   d.check_keys(n, P,
-               {"candidates", "custom", "refits", "refit_evaluations", "significance", "validate",
-                "missing_force"});
+               {"candidates", "exclude", "custom", "refits", "refit_evaluations", "significance",
+                "validate", "missing_force"});
   std::vector<std::string> known = candidate_ids();
   for (const auto& [id, why] : unavailable_candidates()) known.push_back(id);
   if (const YAML::Node c = n["custom"]) {
@@ -115,6 +115,17 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
       d.fail(c, join(P, "candidates"),
              "names no candidate to screen ('unnamed' is refitted only when the named ones "
              "fail)");
+  }
+  if (const YAML::Node c = n["exclude"]) {
+    d.require_sequence(c, join(P, "exclude"));
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      const std::string key = yamlutil::index(join(P, "exclude"), i);
+      const std::string id = d.choice(c[i], key, known);
+      if (id == "unnamed")
+        s.learned_correction = false;
+      else
+        s.exclude.push_back(id);
+    }
   }
   if (const YAML::Node r = n["refits"]) {
     s.refits = bounded_integer(d, r, join(P, "refits"), 0, 20);

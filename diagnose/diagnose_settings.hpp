@@ -34,6 +34,7 @@ struct MissingForceSettings {
 
 struct DiagnoseSettings {
   std::vector<std::string> candidates;  // identifiers; empty = every built-in that applies
+  std::vector<std::string> exclude;     // identifiers left out of `candidates` or the default
   /// The learned correction after failed named refits: on by default, and with a
   /// candidates list only when it names "unnamed".
   bool learned_correction = true;

@@ -368,9 +368,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                     d.scenario));
   const BodyAxis axis = body_axis(nominal);
   const auto wanted = [&](const Candidate& c) {
-    return d.settings.candidates.empty() ||
-           std::find(d.settings.candidates.begin(), d.settings.candidates.end(), c.id) !=
-               d.settings.candidates.end();
+    const auto listed = [&](const std::vector<std::string>& ids) {
+      return std::find(ids.begin(), ids.end(), c.id) != ids.end();
+    };
+    return (d.settings.candidates.empty() || listed(d.settings.candidates)) &&
+           !listed(d.settings.exclude);
   };
   for (auto& c : builtin_candidates(nominal))
     if (wanted(c)) d.candidates.push_back(c);

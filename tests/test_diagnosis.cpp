@@ -105,6 +105,13 @@ TEST(DiagnoseSettings, BadEntriesAreRefusedWithTheirPlace) {
   const DiagnoseSettings w = load_diagnose_settings((dir / "with.yaml").string());
   EXPECT_TRUE(w.learned_correction);
   EXPECT_EQ(w.candidates, std::vector<std::string>{"drag"});
+  // Leaving some out of the default keeps the rest, the learned correction included.
+  test::write_text(dir / "without.yaml", "name: s\ndiagnose:\n  exclude: [discretisation, drag]\n");
+  const DiagnoseSettings wo = load_diagnose_settings((dir / "without.yaml").string());
+  EXPECT_TRUE(wo.candidates.empty());
+  EXPECT_EQ(wo.exclude, (std::vector<std::string>{"discretisation", "drag"}));
+  EXPECT_TRUE(wo.learned_correction);
+  EXPECT_NE(refusal("  exclude: [dicretisation]\n").find("diagnose.exclude[0]"), std::string::npos);
 
   // The user's candidates: an identifier of their own, one term at most, parameters
   // to fit; `term.<p>` names the added term's parameter.
