@@ -131,10 +131,15 @@ FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
   f.precision = ftol_rel;
   if (max_evaluations > 0) f.max_evaluations = max_evaluations;
   if (o.max_evaluations > 0) f.max_evaluations = o.max_evaluations;
+  // Every trial, so that the time a refit spends on rejected line-search trials or
+  // failed simulations is seen where it is spent.
   f.on_evaluation = [&](const FitRecord& r) {
-    if (o.progress && r.accepted)
-      o.progress(fmt::format("  {}: eval {:3d}  rms {:8.4f} mm  {:7.1f} s", label, r.evaluation,
-                             r.rms * 1e3, r.seconds));
+    if (!o.progress) return;
+    const std::string what = r.accepted ? fmt::format("rms {:8.4f} mm", r.rms * 1e3)
+                             : r.ok     ? fmt::format("rms {:8.4f} mm (not better)", r.rms * 1e3)
+                                        : "failed: " + r.error;
+    o.progress(
+        fmt::format("  {}: eval {:3d}  {}  {:7.1f} s", label, r.evaluation, what, r.seconds));
   };
   const FitOutcome out = run_fit(*m.problem, p0, f);
   run.evaluations = out.evaluations;

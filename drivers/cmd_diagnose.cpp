@@ -2,6 +2,7 @@
 // unmodelled effect causes it, and how far it shrinks once that effect is added.
 #include <fmt/format.h>
 
+#include <chrono>
 #include <filesystem>
 
 #include "diagnose/diagnosis.hpp"
@@ -36,7 +37,12 @@ int run(const DiagnoseArgs& args) {
   o.max_evaluations = args.max_evaluations;
   o.interrupt = &g_interrupted;
   if (!args.quiet)
-    o.progress = [](const std::string& line) {
+    // A stage's first line says when it began, so the log shows where the time went.
+    o.progress = [start = std::chrono::steady_clock::now()](const std::string& line) {
+      if (line.rfind("stage ", 0) == 0)
+        fmt::print(
+            "[{:.1f} min] ",
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() / 60);
       fmt::print("{}\n", line);
       std::fflush(stdout);
     };
