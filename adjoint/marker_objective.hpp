@@ -10,7 +10,8 @@
 /// A clock offset reads each run's spline at t + τ; where that falls past the run's
 /// ends, the residual counts with a weight c that falls smoothly from 1 to 0 within
 /// one frame interval (the counted residual is c (x* − x̄)), so Φ stays smooth in τ
-/// and never compares with a track extrapolated far past what was seen.
+/// and never compares with a track extrapolated far past what was seen. The samples
+/// that count are those of τ = 0 at every τ (some with weight 0).
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -66,7 +67,7 @@ class MarkerObjective {
   void observation_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                             double* out) const;
   /// Marker i's simulated position (its offset applied), the observed one as the
-  /// model sees it at t and, on request, the weight c ∈ (0, 1] of its residual (below
+  /// model sees it at t and, on request, the weight c ∈ [0, 1] of its residual (below
   /// 1 only where a clock offset reads past the ends of the run seen around t); false
   /// when it does not count at t.
   bool marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
