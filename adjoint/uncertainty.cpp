@@ -142,6 +142,10 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   // with global error growth): singular values below that are indistinguishable
   // from zero.
   const double threshold = std::max(100 * rtol, 1e-12) * sv[0];
+  // A square root of (JᵀJ)⁻¹ whose unresolved directions are held at the threshold:
+  // what a Gauss–Newton scaling of the fit needs even where the covariance is refused.
+  u.root_inverse = norms.cwiseInverse().asDiagonal() * svd.matrixV() *
+                   sv.cwiseMax(threshold).cwiseInverse().asDiagonal();
   if (!(sv[n - 1] > threshold)) {
     const Eigen::VectorXd dp = norms.cwiseInverse().asDiagonal() * svd.matrixV().col(n - 1);
     u.error = fmt::format(

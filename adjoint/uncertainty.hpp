@@ -19,6 +19,10 @@ struct ParameterUncertainty {
   Eigen::MatrixXd covariance;   // optimiser space (n × n)
   Eigen::VectorXd std_error_p;  // optimiser space
   Eigen::VectorXd std_error;    // model units (q·σ_p for log entries)
+  /// B with B Bᵀ = (JᵀJ)⁻¹ in optimiser space, singular values below the
+  /// sensitivities' accuracy raised to it: set whenever J was computed, also when the
+  /// covariance is refused as singular (ok false).
+  Eigen::MatrixXd root_inverse;
 };
 
 /// Standard errors computed once at a point and reused there: the fit's Gauss–Newton

@@ -2,7 +2,6 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -132,7 +131,10 @@ struct Context {
   // hand-over's re-measurement found over kStageRatio (the tolerances are that much
   // tighter); handover_objective is the best's value at the coarser stage.
   double accuracy = 0, handover_objective = NAN;
-  bool probed = false;             // see probe_accuracy
+  bool probed = false;  // see probe_accuracy
+  /// FitOptions::gauss_newton_start: the start point is evaluated; restart from it in
+  /// Gauss–Newton-scaled parameters.
+  bool gauss_newton_start_pending = false;
   std::vector<double> stage_best;  // the best objective after each accepted move of the stage
   bool plateau = false;            // see kPlateauWindow
 };
@@ -348,6 +350,9 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
       }
     }
     if (c.options.on_evaluation) c.options.on_evaluation(r);
+    if (c.options.gauss_newton_start && c.outcome.evaluations == 1 && r.accepted &&
+        ev.gradient.size() && c.opt->get_algorithm() == nlopt::LD_LBFGS)
+      c.gauss_newton_start_pending = true;
     const Eigen::VectorXd gx = c.basis.size() ? Eigen::VectorXd(c.basis.transpose() * g)
                                               : Eigen::VectorXd(g.cwiseProduct(c.unit));
     if (c.scale == 0) c.scale = objective_scale(ev.ok, r.objective, gx, c.first_step);
@@ -355,7 +360,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     if (interrupted) {
       c.outcome.interrupted = true;
       c.opt->force_stop();
-    } else if (c.plateau) {
+    } else if (c.plateau || c.gauss_newton_start_pending) {
       c.opt->force_stop();
     } else if (c.outcome.evaluations >= c.budget) {
       // NLopt's L-BFGS checks maxeval only between iterations.
@@ -406,10 +411,13 @@ bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd
   const ParameterUncertainty& u = cache.value;
   const double phi = c.outcome.best.misfit;
   const int n = static_cast<int>(best.size());
-  if (!u.ok || !(phi > 0) || !(u.sigma > 0) || u.observations <= n) return false;
-  const Eigen::LLT<Eigen::MatrixXd> llt(u.covariance);  // C = σ̂² (JᵀJ)⁻¹ = L Lᵀ
-  if (llt.info() != Eigen::Success) return false;
-  const Eigen::MatrixXd L = llt.matrixL();
+  // Any L with L Lᵀ = C = σ̂² (JᵀJ)⁻¹ serves (L-BFGS in z does not see a rotation); a
+  // direction the data barely resolve (V09's λ at 660 Pa beside μ at 1.3e5 Pa) is
+  // scaled at the sensitivities' accuracy rather than refused.
+  if (u.root_inverse.rows() != n || !(phi > 0) || !(u.sigma > 0) || u.observations <= n)
+    return false;
+  const Eigen::MatrixXd L = u.sigma * u.root_inverse;
+  if (!L.allFinite()) return false;
   // Δp_GN = −(1/κ)(JᵀJ)⁻¹ g = −β C g with β = (N − n) / (2Φ); with B = s L the
   // step −½ B Lᵀg/|Lᵀg| equals it for s = 2β|Lᵀg|.
   const double beta = (u.observations - n) / (2 * phi);
@@ -522,6 +530,22 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   constexpr double kRestartGain = 1e-6, kConvergedGradient = 1e-8;
   int preconditioned_at = -1;  // the best evaluation a Gauss–Newton restart began from
   c.tolerance_scale = std::max(1.0, options.start_tolerance_scale);
+  // Continues in Gauss–Newton-scaled parameters about the best point (see
+  // precondition), once per best point; false when L-BFGS is not the algorithm or
+  // JᵀJ is not available there.
+  const auto scale_by_gauss_newton = [&](const char* why) {
+    if (algorithm != nlopt::LD_LBFGS || preconditioned_at == c.outcome.best.evaluation ||
+        c.best_g.size() != n || !precondition(c, c.outcome.p, c.best_g))
+      return false;
+    preconditioned_at = c.outcome.best.evaluation;
+    // z is unbounded; the box is kept by clamping p (objective).
+    opt.set_lower_bounds(std::vector<double>(n, -HUGE_VAL));
+    opt.set_upper_bounds(std::vector<double>(n, HUGE_VAL));
+    if (options.on_progress)
+      options.on_progress(fmt::format(
+          "{}: going on in Gauss–Newton-scaled parameters (JᵀJ from one sensitivity solve)", why));
+    return true;
+  };
   for (int restart = 0;;) {
     double best_before = c.outcome.best.objective;
     c.remeasured = NAN;
@@ -545,6 +569,25 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       gave_up = true;
     }
     if (c.error) std::rethrow_exception(c.error);
+    if (c.gauss_newton_start_pending) {
+      // Stopped after the start point's evaluation on purpose: go on from it, scaled
+      // when JᵀJ is to be had, as before otherwise.
+      c.gauss_newton_start_pending = false;
+      if (!c.outcome.interrupted && !c.budget_spent && !c.plateau) {
+        if (c.tolerance_scale <= 1 && scale_by_gauss_newton("the start point is evaluated")) {
+          c.origin = c.outcome.p;
+          x.assign(n, 0.0);
+        } else {
+          if (options.on_progress)
+            options.on_progress("no Gauss–Newton scaling at the start point; going on unscaled");
+          for (int j = 0; j < n; ++j) x[j] = c.outcome.p[j] / c.unit[j];
+        }
+        opt.set_maxeval(budget - c.outcome.evaluations);
+        c.scale = 0;
+        c.first_step = kFirstStep;
+        continue;
+      }
+    }
     // L-BFGS may report the stall's force_stop as a plain failure too.
     const bool stalled = c.stalled;
     if (c.stalled && !c.outcome.interrupted && !c.budget_spent) {
@@ -605,19 +648,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       // too: in an ill-conditioned valley (the noise-free bar in stages, λ 1.9× off at
       // RMS 0.011 mm) it looks the same as a stall at the accuracy floor.
       const auto gauss_newton_restart = [&] {
-        if (coarse || algorithm != nlopt::LD_LBFGS ||
-            preconditioned_at == c.outcome.best.evaluation || c.best_g.size() != n ||
-            !precondition(c, c.outcome.p, c.best_g))
-          return false;
-        preconditioned_at = c.outcome.best.evaluation;
-        // z is unbounded; the box is kept by clamping p (objective).
-        opt.set_lower_bounds(std::vector<double>(n, -HUGE_VAL));
-        opt.set_upper_bounds(std::vector<double>(n, HUGE_VAL));
-        if (options.on_progress)
-          options.on_progress(
-              "line search stalled: restarting in Gauss–Newton-scaled parameters (JᵀJ from one "
-              "sensitivity solve)");
-        return true;
+        return !coarse && scale_by_gauss_newton("line search stalled");
       };
       if (stalled && c.accuracy > 0) {
         if (left <= 0 || restart >= kMaxRestarts || !gauss_newton_restart()) {

@@ -53,6 +53,12 @@ struct FitOptions {
   /// over the plateau window, or from a restart, is no gain (the diagnosis sets it from
   /// its χ² thresholds; a single-stage fit has no measured accuracy to stop at).
   double precision = 0;
+  /// Start in Gauss–Newton-scaled parameters: after the start point's evaluation, one
+  /// sensitivity solve there gives JᵀJ and the fit goes on as after a Gauss–Newton
+  /// restart (L-BFGS only). For a start in a curved valley of correlated parameters
+  /// (V09's clock lag refitted with the viscosity that had absorbed it), where plain
+  /// L-BFGS crawled for 16 evaluations at 0.04 % per step.
+  bool gauss_newton_start = false;
   /// Called after every evaluation (the driver prints accepted ones and failures,
   /// appends history, saves the resume state).
   std::function<void(const FitRecord&)> on_evaluation;
