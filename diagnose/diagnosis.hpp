@@ -63,8 +63,8 @@ struct RefitResult {
   int dof = 0;
   double bic = 0;  // ‖r‖²/σ̂² + k ln N, k counting the nominal's too
   std::vector<HeldOutFigures> heldout;
-  double heldout_drop = 0;       // Σ (‖h₀‖² − ‖h‖²) (m²)
-  double heldout_threshold = 0;  // z σ̂ ‖h − h₀‖·2: what noise alone could give
+  double heldout_drop = 0;  // Σ (‖h₀‖² − ‖h‖²) (m²)
+  double heldout_threshold = 0;  // 2 z σ̂ ‖h − h₀‖ at α over the refits: what noise alone could give
   bool passes_training = false, passes_heldout = false;
   /// The refit ended above the nominal misfit (a local minimum, a budget spent far
   /// out): reported at the nominal point, which every nested candidate contains.
