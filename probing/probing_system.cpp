@@ -1,0 +1,110 @@
+#include "probing/probing_system.hpp"
+
+#include <fmt/format.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
+
+#include "engine/error.hpp"
+
+namespace kelvin {
+
+int elastic_term(const FemModel& model) {
+  int found = -1;
+  for (int k = 0; k < static_cast<int>(model.terms().size()); ++k) {
+    if (model.terms()[k].model->is_viscous()) continue;
+    if (found >= 0)
+      throw Error(
+          "static probing: the material has more than one elastic term; it fits one "
+          "(its parameters per element)");
+    found = k;
+  }
+  if (found < 0) throw Error("static probing: the material has no elastic term");
+  return found;
+}
+
+std::vector<std::pair<int, int>> face_neighbours(const Mesh& mesh) {
+  std::vector<std::pair<std::array<int, 3>, int>> faces;
+  faces.reserve(4 * mesh.num_tets());
+  for (int e = 0; e < mesh.num_tets(); ++e)
+    for (int skip = 0; skip < 4; ++skip) {
+      std::array<int, 3> f;
+      for (int a = 0, j = 0; a < 4; ++a)
+        if (a != skip) f[j++] = mesh.tets(a, e);
+      std::sort(f.begin(), f.end());
+      faces.emplace_back(f, e);
+    }
+  std::sort(faces.begin(), faces.end());
+  std::vector<std::pair<int, int>> pairs;
+  for (size_t i = 1; i < faces.size(); ++i)
+    if (faces[i].first == faces[i - 1].first)
+      pairs.emplace_back(faces[i - 1].second, faces[i].second);
+  return pairs;
+}
+
+std::pair<std::vector<int>, int> element_groups(const Mesh& mesh, ElementGrouping g) {
+  std::vector<int> group(mesh.num_tets(), 0);
+  if (g == ElementGrouping::kGlobal) return {group, 1};
+  if (g == ElementGrouping::kElement) {
+    for (int e = 0; e < mesh.num_tets(); ++e) group[e] = e;
+    return {group, mesh.num_tets()};
+  }
+  std::vector<int> labels(mesh.region.begin(), mesh.region.end());
+  std::sort(labels.begin(), labels.end());
+  labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
+  for (int e = 0; e < mesh.num_tets(); ++e)
+    group[e] = static_cast<int>(std::lower_bound(labels.begin(), labels.end(), mesh.region[e]) -
+                                labels.begin());
+  return {group, static_cast<int>(labels.size())};
+}
+
+Eigen::SparseMatrix<double> force_parameter_jacobian(const FemModel& model, int term,
+                                                     const Eigen::Matrix3Xd& x,
+                                                     const std::vector<int>& group, int columns,
+                                                     int column_offset, bool require_linear) {
+  const MaterialTerm& t = model.terms()[term];
+  const int nq = static_cast<int>(t.model->params().size());
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(12 * nq * model.mesh().num_tets());
+  MaterialResponse out;
+  for (int e = 0; e < model.mesh().num_tets(); ++e) {
+    const TetElement& el = model.elements()[e];
+    Eigen::Matrix<double, 3, 4> xe;
+    for (int a = 0; a < 4; ++a) xe.col(a) = x.col(el.nodes[a]);
+    MaterialPoint p;
+    p.F = xe * el.G.transpose();
+    p.q = t.q.col(e).data();
+    p.state = t.state.size() ? t.state.col(e).data() : nullptr;
+    p.element = e;
+    p.rest_tangent = model.rest_tangent(e);
+    if (!t.model->evaluate(p, kStress | kParamDerivative, out))
+      throw Error(
+          fmt::format("element {} is inadmissible (det F = {:.3g}) in the measured positions", e,
+                      p.F.determinant()));
+    if (require_linear) {
+      const Eigen::Map<const Eigen::VectorXd> q(p.q, nq);
+      const double scale = out.P.norm() + (out.dPdq * q.cwiseAbs()).norm();
+      if ((out.P.reshaped() - out.dPdq * q).norm() > 1e-8 * scale + 1e-300)
+        throw Error(fmt::format(
+            "the elastic model '{}' is not linear in its parameters (element {}: P ≠ Σ q ∂P/∂q); "
+            "use one that is, such as corotational (warped stiffness)",
+            t.model->name(), e));
+    }
+    for (int k = 0; k < nq; ++k) {
+      const Eigen::Matrix3d dP = out.dPdq.col(k).reshaped(3, 3);
+      const Eigen::Matrix<double, 3, 4> f = el.volume * dP * el.G;
+      const int col = column_offset + group[e] * nq + k;
+      for (int a = 0; a < 4; ++a)
+        for (int i = 0; i < 3; ++i) {
+          const int d = model.dof(el.nodes[a], i);
+          if (d >= 0 && f(i, a) != 0) entries.emplace_back(d, col, f(i, a));
+        }
+    }
+  }
+  Eigen::SparseMatrix<double> J(model.num_dofs(), columns);
+  J.setFromTriplets(entries.begin(), entries.end());
+  return J;
+}
+
+}  // namespace kelvin
