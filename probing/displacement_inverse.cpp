@@ -1,0 +1,208 @@
+#include "probing/displacement_inverse.hpp"
+
+#include <fmt/format.h>
+
+#include <Eigen/SparseCholesky>
+#include <cmath>
+#include <nlopt.hpp>
+
+#include "engine/error.hpp"
+#include "engine/static_solver.hpp"
+
+namespace kelvin {
+namespace {
+
+struct Problem {
+  explicit Problem(std::vector<ObservedProbe>& m) : ms(m) {}
+  std::vector<ObservedProbe>& ms;
+  int term = 0, nq = 0, groups = 0;
+  std::vector<int> group;
+  Eigen::SparseMatrix<double> L;  // smoothness over log θ
+  double reg = 0;                 // γ² S / n_L
+  double data_size = 1;           // S
+  std::vector<Eigen::VectorXd> x_free;
+  int evaluations = 0;
+  double best = INFINITY, best_data = INFINITY;
+  Eigen::VectorXd best_z;
+  std::string failure;
+
+  /// Φ / S and its gradient in z = log θ; false when a static solve fails.
+  bool evaluate(const Eigen::VectorXd& z, double& phi, double& data, Eigen::VectorXd* grad) {
+    const Mesh& mesh = ms[0].model->mesh();
+    const int columns = groups * nq;
+    Eigen::VectorXd dphi = Eigen::VectorXd::Zero(columns);
+    data = 0;
+    for (size_t m = 0; m < ms.size(); ++m) {
+      FemModel& model = *ms[m].model;
+      Eigen::MatrixXd& q = model.terms()[term].q;
+      for (int e = 0; e < mesh.num_tets(); ++e)
+        q.col(e) = z.segment(group[e] * nq, nq).array().exp();
+      StaticResult s = solve_static(model, 0, x_free[m]);
+      if (!s.converged) {
+        x_free[m] = rigid_initial_guess(model, 0);
+        s = solve_static(model, 0, x_free[m]);
+      }
+      if (!s.converged) {
+        failure = fmt::format("measurement {}: no static equilibrium ({})", m, s.message);
+        return false;
+      }
+      Eigen::Matrix3Xd x, v;
+      const Eigen::VectorXd zero = Eigen::VectorXd::Zero(x_free[m].size());
+      model.expand(0, x_free[m].data(), zero.data(), x, v);
+      const Eigen::Matrix3Xd at = marker_positions(mesh, ms[m].markers, x);
+      Eigen::Matrix3Xd pull = Eigen::Matrix3Xd::Zero(3, mesh.num_nodes());
+      for (int j = 0; j < at.cols(); ++j) {
+        if (!ms[m].observed.col(j).allFinite()) continue;
+        const Eigen::Vector3d r = at.col(j) - ms[m].observed.col(j);
+        data += 0.5 * r.squaredNorm();
+        const MarkerEmbedding& mk = ms[m].markers[j];
+        for (int a = 0; a < 4; ++a) pull.col(mesh.tets(a, mk.tet)) += mk.weights[a] * r;
+      }
+      if (!grad) continue;
+      AssemblyRequest req;
+      req.force = false, req.stiffness = true;
+      AssemblyOutput out;
+      v.setZero();
+      if (!model.assemble(x, v, req, out)) {
+        failure = fmt::format("measurement {}: element {} inadmissible", m, out.failed_element);
+        return false;
+      }
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> K(
+          to_sparse_matrix(model.pattern(), out.K));
+      Eigen::VectorXd rhs(model.num_dofs());
+      model.restrict(pull, rhs.data());
+      const Eigen::VectorXd lambda = K.solve(rhs);
+      if (K.info() != Eigen::Success || !lambda.allFinite()) {
+        failure = fmt::format("measurement {}: the stiffness at equilibrium is singular", m);
+        return false;
+      }
+      dphi -=
+          force_parameter_jacobian(model, term, x, group, columns, 0, false).transpose() * lambda;
+    }
+    const Eigen::VectorXd Lz = L.rows() ? Eigen::VectorXd(L * z) : Eigen::VectorXd();
+    phi = (data + 0.5 * reg * Lz.squaredNorm()) / data_size;
+    if (grad) {
+      *grad = z.array().exp().matrix().cwiseProduct(dphi);
+      if (L.rows()) *grad += reg * (L.transpose() * Lz);
+      *grad /= data_size;
+    }
+    return true;
+  }
+};
+
+double objective(unsigned n, const double* zp, double* grad, void* data) {
+  Problem& p = *static_cast<Problem*>(data);
+  const Eigen::VectorXd z = Eigen::Map<const Eigen::VectorXd>(zp, n);
+  double phi = 0, fit = 0;
+  Eigen::VectorXd g;
+  ++p.evaluations;
+  if (!p.evaluate(z, phi, fit, grad ? &g : nullptr)) throw nlopt::forced_stop();
+  if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g;
+  if (phi < p.best) p.best = phi, p.best_data = fit, p.best_z = z;
+  return phi;
+}
+
+}  // namespace
+
+DisplacementInverseResult displacement_based_inverse(std::vector<ObservedProbe>& ms,
+                                                     const DisplacementInverseOptions& o) {
+  if (ms.empty()) throw Error("displacement-based inverse: no measurement");
+  const FemModel& first = *ms[0].model;
+  const Mesh& mesh = first.mesh();
+  Problem p(ms);
+  p.term = elastic_term(first);
+  const Material& law = *first.terms()[p.term].model;
+  p.nq = static_cast<int>(law.params().size());
+  for (const auto& info : law.params())
+    if (!info.positive)
+      throw Error(fmt::format(
+          "displacement-based inverse: parameter '{}' of '{}' is not declared positive; the fit "
+          "works in log space",
+          info.name, law.name()));
+  std::tie(p.group, p.groups) = element_groups(mesh, o.grouping);
+
+  p.data_size = 0;
+  int observed = 0;
+  for (size_t m = 0; m < ms.size(); ++m) {
+    const FemModel& model = *ms[m].model;
+    if (&model.mesh() != &mesh || elastic_term(model) != p.term ||
+        model.terms()[p.term].model->name() != law.name())
+      throw Error(
+          fmt::format("displacement-based inverse: measurement {} is of another mesh or material "
+                      "than the first",
+                      m));
+    if (ms[m].observed.cols() != static_cast<int>(ms[m].markers.size()))
+      throw Error(fmt::format(
+          "displacement-based inverse: measurement {} has {} observed positions for {} markers", m,
+          ms[m].observed.cols(), ms[m].markers.size()));
+    const Eigen::Matrix3Xd rest = marker_positions(mesh, ms[m].markers, mesh.nodes);
+    for (int j = 0; j < rest.cols(); ++j)
+      if (ms[m].observed.col(j).allFinite())
+        ++observed, p.data_size += (ms[m].observed.col(j) - rest.col(j)).squaredNorm();
+    p.x_free.push_back(rigid_initial_guess(model, 0));
+  }
+  if (observed == 0 || !(p.data_size > 0))
+    throw Error("displacement-based inverse: no marker is observed away from its rest position");
+
+  if (o.grouping == ElementGrouping::kElement && o.gamma_space > 0) {
+    const auto pairs = face_neighbours(mesh);
+    std::vector<Eigen::Triplet<double>> t;
+    int row = 0;
+    for (const auto& [e, f] : pairs)
+      for (int k = 0; k < p.nq; ++k, ++row) {
+        t.emplace_back(row, e * p.nq + k, 1.0);
+        t.emplace_back(row, f * p.nq + k, -1.0);
+      }
+    p.L.resize(row, p.groups * p.nq);
+    p.L.setFromTriplets(t.begin(), t.end());
+    p.reg = o.gamma_space * o.gamma_space * p.data_size / std::max(row, 1);
+  }
+
+  // Start: each group's mean of the first model's values, in log space.
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(p.groups * p.nq);
+  Eigen::VectorXi count = Eigen::VectorXi::Zero(p.groups);
+  for (int e = 0; e < mesh.num_tets(); ++e) {
+    z.segment(p.group[e] * p.nq, p.nq) += first.terms()[p.term].q.col(e);
+    ++count[p.group[e]];
+  }
+  for (int g = 0; g < p.groups; ++g)
+    z.segment(g * p.nq, p.nq) = (z.segment(g * p.nq, p.nq) / std::max(count[g], 1)).array().log();
+  if (!z.allFinite()) throw Error("displacement-based inverse: the start values must be positive");
+  {
+    double phi = 0, data = 0;
+    if (!p.evaluate(z, phi, data, nullptr))
+      throw Error("displacement-based inverse: at the start values, " + p.failure);
+    p.best = phi, p.best_data = data, p.best_z = z;
+  }
+
+  nlopt::opt opt(nlopt::LD_LBFGS, static_cast<unsigned>(z.size()));
+  const double span = std::log(1e4);
+  std::vector<double> lo(z.size()), hi(z.size()), zv(z.data(), z.data() + z.size());
+  for (int i = 0; i < z.size(); ++i) lo[i] = z[i] - span, hi[i] = z[i] + span;
+  opt.set_lower_bounds(lo);
+  opt.set_upper_bounds(hi);
+  opt.set_min_objective(objective, &p);
+  opt.set_ftol_rel(o.relative_tolerance);
+  opt.set_maxeval(o.max_evaluations);
+  DisplacementInverseResult result;
+  double value = 0;
+  try {
+    const nlopt::result r = opt.optimize(zv, value);
+    result.stop = r == nlopt::MAXEVAL_REACHED ? "evaluation budget spent" : "converged";
+  } catch (const nlopt::forced_stop&) {
+    result.stop = "static solve failed: " + p.failure + "; the best point so far is kept";
+  } catch (const nlopt::roundoff_limited&) {
+    result.stop = "converged to round-off";
+  }
+  for (const auto& info : law.params()) result.parameters.push_back(info.name);
+  result.q.resize(p.nq, mesh.num_tets());
+  for (int e = 0; e < mesh.num_tets(); ++e)
+    result.q.col(e) = p.best_z.segment(p.group[e] * p.nq, p.nq).array().exp();
+  result.rms = std::sqrt(2 * p.best_data / (3.0 * observed));
+  result.evaluations = p.evaluations;
+  // Leave the models at the fitted values.
+  for (auto& m : ms) m.model->terms()[p.term].q = result.q;
+  return result;
+}
+
+}  // namespace kelvin
