@@ -48,5 +48,6 @@ void register_gradcheck(CLI::App& app, int& exit_code);
 void register_fit(CLI::App& app, int& exit_code);
 void register_capture(CLI::App& app, int& exit_code);
 void register_diagnose(CLI::App& app, int& exit_code);
+void register_probe(CLI::App& app, int& exit_code);
 
 }  // namespace kelvin

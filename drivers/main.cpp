@@ -52,6 +52,7 @@ int main(int argc, char** argv) {
   kelvin::register_fit(app, exit_code);
   kelvin::register_capture(app, exit_code);
   kelvin::register_diagnose(app, exit_code);
+  kelvin::register_probe(app, exit_code);
 
   kelvin::report_crashes("");
   std::signal(SIGINT, on_signal);

@@ -12,6 +12,9 @@
 namespace kelvin {
 namespace {
 
+/// L-BFGS's first step in log θ: a factor 1.65 (kelvin's fit loop takes the same).
+constexpr double kFirstStep = 0.5;
+
 struct Problem {
   explicit Problem(std::vector<ObservedProbe>& m) : ms(m) {}
   std::vector<ObservedProbe>& ms;
@@ -24,7 +27,9 @@ struct Problem {
   int evaluations = 0;
   double best = INFINITY, best_data = INFINITY;
   Eigen::VectorXd best_z;
-  std::string failure;
+  std::string failure;  // of the last failed trial
+  int failed = 0;
+  double scale = 0;  // Φ's factor: L-BFGS's first step is kFirstStep long
 
   /// Φ / S and its gradient in z = log θ; false when a static solve fails.
   bool evaluate(const Eigen::VectorXd& z, double& phi, double& data, Eigen::VectorXd* grad) {
@@ -90,16 +95,25 @@ struct Problem {
   }
 };
 
+/// What a failed static solve returns: far above any Φ, so that L-BFGS's line search
+/// backs off from the trial (as kelvin's fit loop does with its failed trials).
+constexpr double kFailedTrial = 1e30;
+
 double objective(unsigned n, const double* zp, double* grad, void* data) {
   Problem& p = *static_cast<Problem*>(data);
   const Eigen::VectorXd z = Eigen::Map<const Eigen::VectorXd>(zp, n);
   double phi = 0, fit = 0;
   Eigen::VectorXd g;
   ++p.evaluations;
-  if (!p.evaluate(z, phi, fit, grad ? &g : nullptr)) throw nlopt::forced_stop();
-  if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g;
+  if (!p.evaluate(z, phi, fit, grad ? &g : nullptr)) {
+    ++p.failed;
+    if (grad) std::fill(grad, grad + n, 0.0);
+    return kFailedTrial;
+  }
+  if (p.scale == 0) p.scale = g.norm() > 0 ? kFirstStep / g.norm() : 1 / phi;
+  if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = p.scale * g;
   if (phi < p.best) p.best = phi, p.best_data = fit, p.best_z = z;
-  return phi;
+  return p.scale * phi;
 }
 
 }  // namespace
@@ -189,11 +203,12 @@ DisplacementInverseResult displacement_based_inverse(std::vector<ObservedProbe>&
   try {
     const nlopt::result r = opt.optimize(zv, value);
     result.stop = r == nlopt::MAXEVAL_REACHED ? "evaluation budget spent" : "converged";
-  } catch (const nlopt::forced_stop&) {
-    result.stop = "static solve failed: " + p.failure + "; the best point so far is kept";
   } catch (const nlopt::roundoff_limited&) {
     result.stop = "converged to round-off";
   }
+  if (p.failed > 0)
+    result.stop += fmt::format(" ({} trial(s) without a static equilibrium, the last: {})",
+                               p.failed, p.failure);
   for (const auto& info : law.params()) result.parameters.push_back(info.name);
   result.q.resize(p.nq, mesh.num_tets());
   for (int e = 0; e < mesh.num_tets(); ++e)

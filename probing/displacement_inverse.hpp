@@ -46,8 +46,8 @@ struct DisplacementInverseResult {
 
 /// Starts from the first model's parameters (averaged over each group). Throws
 /// kelvin::Error when a fitted parameter may be ≤ 0, a measurement observes
-/// nothing, or the first equilibrium cannot be found; a later failing static solve
-/// ends the fit at the best point so far (`stop` says so).
+/// nothing, or the start has no equilibrium; a trial without one is a failed trial
+/// the line search backs off from (`stop` counts them).
 DisplacementInverseResult displacement_based_inverse(
     std::vector<ObservedProbe>& measurements, const DisplacementInverseOptions& options = {});
 

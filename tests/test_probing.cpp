@@ -7,7 +7,9 @@
 // the two with marker noise.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <random>
 
@@ -18,6 +20,7 @@
 #include "engine/static_solver.hpp"
 #include "probing/displacement_inverse.hpp"
 #include "probing/force_inverse.hpp"
+#include "test_support.hpp"
 
 using namespace kelvin;
 
@@ -326,4 +329,60 @@ TEST(ProbingInverses, WithMarkerNoiseTheDisplacementBasedEstimateIsCloserToTheTr
   EXPECT_GT(disp.q(1, e_in), 1.5 * disp.q(1, e_out));
   // The residual is the noise: 0.2 mm per coordinate.
   EXPECT_NEAR(disp.rms, 2e-4, 2e-5);
+}
+
+TEST(ProbeFitCli, TheBundledExampleFitsTheFoamToWithinItsWarpedLinearBias) {
+  const auto out = test::scratch("probe-fit");
+  const test::CliRun r = test::run_kelvin(
+      "probe-fit " KELVIN_SOURCE_DIR "/yaml/examples/probe-foam-block.yaml -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  double lambda = 0, mu = 0, rms = 0;
+  const auto fitted = r.out.find("fitted: lambda");
+  ASSERT_NE(fitted, std::string::npos) << r.out;
+  ASSERT_EQ(std::sscanf(r.out.c_str() + fitted, "fitted: lambda %lf mu %lf", &lambda, &mu), 2);
+  const auto at = r.out.find("marker rms");
+  ASSERT_EQ(std::sscanf(r.out.c_str() + at, "marker rms %lf", &rms), 1) << r.out;
+  // The truth is neo-Hookean (λ 20 kPa, μ 10 kPa) pressed 15 % deep: the warped-linear
+  // law reads it somewhat stiffer, and the markers are left with their 0.05 mm noise.
+  EXPECT_GT(mu, 1.0 * kMu);
+  EXPECT_LT(mu, 1.2 * kMu);
+  EXPECT_GT(lambda, 0.9 * kLambda);
+  EXPECT_LT(lambda, 1.3 * kLambda);
+  EXPECT_NEAR(rms, 0.05, 0.005);
+  const std::string fields = test::read_text(out / "fitted-fields.csv");
+  EXPECT_EQ(fields.rfind("element,elastic.lambda,elastic.mu\n", 0), 0u);
+  EXPECT_EQ(std::count(fields.begin(), fields.end(), '\n'), 1 + 1536);
+}
+
+TEST(ProbeFitCli, BadProbingEntriesAreNamedWithTheirPlace) {
+  const auto dir = test::scratch("probe-bad");
+  test::write_text(dir / "markers.csv", "name,x,y,z\ntop,0.02,0.02,0.02\n");
+  test::write_text(dir / "seen.csv", "name,x,y,z\ntpo,0.02,0.02,0.019\n");
+  auto scenario = [&](const std::string& probing) {
+    test::write_text(dir / "s.yaml",
+                     "mesh: { generate: box, lo: [0, 0, 0], hi: [0.04, 0.04, 0.02], "
+                     "element_size: 0.01 }\n"
+                     "material: { density: 60, elastic: { model: corotational, lambda: 2e4, mu: "
+                     "1e4 } }\n"
+                     "clamps: [{ name: table, select: { plane: { axis: z, at: 0 } } }]\n"
+                     "markers: { rest: markers.csv }\n" +
+                         probing);
+    return test::run_kelvin("probe-fit " + (dir / "s.yaml").string() + " -o " +
+                            (dir / "out").string());
+  };
+  const std::string load =
+      "loads: [{ name: p, select: { box: { lo: [0.01, 0.01, 0.019], hi: [0.03, 0.03, 0.021] } }, "
+      "force: [0, 0, -1] }]";
+  test::CliRun r =
+      scenario("probing:\n  measurements:\n    - { name: a, " + load + ", observed: seen.csv }\n");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("s.yaml:7:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("probing.measurements[0].observed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("marker 'tpo' is not one of markers.rest"), std::string::npos) << r.out;
+  r = scenario("probing:\n  method: forces\n  measurements:\n    - { name: a, " + load + " }\n");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("s.yaml:6:11: probing.method"), std::string::npos) << r.out;
+  r = scenario("probing:\n  measurements:\n    - { name: a, " + load + " }\n");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("measurement 'a' has no observed positions"), std::string::npos) << r.out;
 }

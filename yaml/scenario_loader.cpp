@@ -93,14 +93,15 @@ Scenario load_scenario(const std::string& path) {
   const Node& root = d.root();
   d.check_keys(root, "",
                {"name", "mesh", "material", "gravity", "initial", "clamps", "loads", "markers",
-                "time", "solver", "fit", "diagnose"});
+                "time", "solver", "fit", "diagnose", "probing"});
   Scenario s;
   s.path = path;
   s.name =
       root["name"] ? d.string(root["name"], "name") : std::filesystem::path(path).stem().string();
   if (s.name.empty()) d.fail(root["name"], "name", "must not be empty");
 
-  s.time = load_time(d, d.required(root, "", "time"));
+  // A scenario of static measurements alone (`probing:`) runs no time.
+  if (root["time"] || !root["probing"]) s.time = load_time(d, d.required(root, "", "time"));
   if (root["solver"]) s.solver = load_solver(d, root["solver"]);
   if (root["gravity"]) s.gravity = d.vec3(root["gravity"], "gravity");
   if (root["initial"])
@@ -126,8 +127,8 @@ Scenario load_scenario(const std::string& path) {
     s.fit = scenario_detail::load_fit(d, root["fit"], s);
     s.fit.present = true;
   }
-  // `diagnose` belongs to the diagnosis driver, which reads it from the file itself;
-  // here it is only a reserved name.
+  // `diagnose` and `probing` belong to their drivers, which read them from the file
+  // itself; here they are only reserved names.
   return s;
 }
 

@@ -1,0 +1,78 @@
+#include "probing/probing_settings.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "engine/error.hpp"
+#include "yaml/scenario_sections.hpp"
+#include "yaml/yaml_util.hpp"
+
+namespace kelvin {
+
+using yamlutil::index;
+using yamlutil::join;
+
+ProbingSpec load_probing(const Scenario& s) {
+  const yamlutil::Doc d(s.path);
+  const YAML::Node root = d.required(d.root(), "", "probing");
+  const std::string P = "probing";
+  d.require_map(root, P);
+  d.check_keys(root, P, {"measurements", "method", "grouping", "gamma"});
+  ProbingSpec spec;
+  if (const YAML::Node n = root["method"])
+    spec.method = d.choice(n, join(P, "method"), {"displacement", "force"});
+  if (const YAML::Node n = root["grouping"]) {
+    const std::string g = d.choice(n, join(P, "grouping"), {"global", "region", "element"});
+    spec.grouping = g == "global"   ? ElementGrouping::kGlobal
+                    : g == "region" ? ElementGrouping::kRegion
+                                    : ElementGrouping::kElement;
+  }
+  if (const YAML::Node n = root["gamma"]) spec.gamma = d.non_negative(n, join(P, "gamma"), "");
+  const YAML::Node ms = d.required(root, P, "measurements");
+  d.require_sequence(ms, join(P, "measurements"));
+  if (ms.size() == 0) d.fail(ms, join(P, "measurements"), "needs at least one measurement");
+  const auto& markers = s.markers.embedded;
+  for (size_t i = 0; i < ms.size(); ++i) {
+    const YAML::Node m = ms[i];
+    const std::string MP = index(join(P, "measurements"), i);
+    d.require_map(m, MP);
+    d.check_keys(m, MP, {"name", "loads", "observed"});
+    ProbeMeasurementSpec pm;
+    pm.name = d.string(d.required(m, MP, "name"), join(MP, "name"));
+    for (const auto& other : spec.measurements)
+      if (other.name == pm.name)
+        d.fail(m["name"], join(MP, "name"),
+               fmt::format("'{}' is taken by an earlier one", pm.name));
+    pm.loads = scenario_detail::load_loads(d, d.required(m, MP, "loads"), s.mesh, s.clamps);
+    pm.observed =
+        Eigen::Matrix3Xd::Constant(3, markers.size(), std::numeric_limits<double>::quiet_NaN());
+    if (const YAML::Node o = m["observed"]) {
+      if (markers.empty())
+        d.fail(o, join(MP, "observed"), "needs the scenario's markers (markers.rest)");
+      pm.observed_path = d.existing_file(o, join(MP, "observed"));
+      MarkerRest rest;
+      try {
+        rest = read_marker_rest(pm.observed_path);
+      } catch (const Error& e) {
+        d.fail(o, join(MP, "observed"), e.what());
+      }
+      for (size_t j = 0; j < rest.names.size(); ++j) {
+        const auto it = std::find_if(markers.begin(), markers.end(), [&](const MarkerEmbedding& k) {
+          return k.name == rest.names[j];
+        });
+        if (it == markers.end())
+          d.fail(o, join(MP, "observed"),
+                 fmt::format("{}: marker '{}' is not one of markers.rest", pm.observed_path,
+                             rest.names[j]));
+        pm.observed.col(it - markers.begin()) = rest.positions.col(j);
+      }
+    }
+    spec.measurements.push_back(std::move(pm));
+  }
+  return spec;
+}
+
+}  // namespace kelvin

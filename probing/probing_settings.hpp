@@ -1,0 +1,35 @@
+#pragma once
+/// \file
+/// The `probing:` section of a scenario: static measurements of the specimen, each
+/// the loads a probe adds to the scenario's own (gravity, `loads:`) and the markers'
+/// measured loaded positions, and how `kelvin probe-fit` inverts them.
+#include <string>
+#include <vector>
+
+#include "engine/csv.hpp"
+#include "probing/probing_system.hpp"
+#include "yaml/scenario.hpp"
+
+namespace kelvin {
+
+struct ProbeMeasurementSpec {
+  std::string name;
+  std::vector<LoadSpec> loads;  // what the probe adds to the scenario's loads
+  std::string observed_path;    // `name,x,y,z`; "" when not given (kelvin probe writes it)
+  /// Per scenario marker (markers.rest order), its measured loaded position; NaN where
+  /// the file has no row for it (occluded).
+  Eigen::Matrix3Xd observed;
+};
+
+struct ProbingSpec {
+  std::vector<ProbeMeasurementSpec> measurements;
+  std::string method = "displacement";  // displacement | force
+  ElementGrouping grouping = ElementGrouping::kGlobal;
+  double gamma = -1;  // smoothness (relative); < 0: the L-curve (force) or 0 (displacement)
+};
+
+/// Reads `probing:` from the scenario file (after load_scenario succeeded on it).
+/// Throws kelvin::Error "file:line:col: probing...: why" for a bad entry.
+ProbingSpec load_probing(const Scenario& scenario);
+
+}  // namespace kelvin
