@@ -386,3 +386,22 @@ TEST(ProbeFitCli, BadProbingEntriesAreNamedWithTheirPlace) {
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("measurement 'a' has no observed positions"), std::string::npos) << r.out;
 }
+
+TEST(ProbeCli, SimulatesTheExamplesMeasurementsToWithinTheirNoise) {
+  // The example's observed files are `kelvin probe` of its truth plus 0.05 mm of noise.
+  const auto out = test::scratch("probe-sim");
+  const std::string dir = KELVIN_SOURCE_DIR "/yaml/examples/probe-foam-block/";
+  const test::CliRun r = test::run_kelvin("probe " + dir + "truth.yaml -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  for (const char* name : {"centre", "left", "corner"}) {
+    const MarkerRest sim = read_marker_rest((out / (std::string(name) + ".csv")).string());
+    const MarkerRest seen = read_marker_rest(dir + name + ".csv");
+    ASSERT_EQ(sim.names, seen.names);
+    ASSERT_EQ(sim.names.size(), 81u);
+    const double rms = std::sqrt((sim.positions - seen.positions).squaredNorm() / (3.0 * 81));
+    EXPECT_NEAR(rms, 5e-5, 1e-5) << name;
+    // And the probe pressed it: the largest displacement is millimetres.
+    const MarkerRest rest = read_marker_rest(dir + "markers.csv");
+    EXPECT_GT((sim.positions - rest.positions).colwise().norm().maxCoeff(), 2e-3) << name;
+  }
+}
