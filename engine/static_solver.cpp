@@ -12,6 +12,7 @@ namespace {
 struct Residual {
   const FemModel& model;
   double t;
+  double load_fraction;
   Eigen::Matrix3Xd x, v;
   AssemblyOutput out;
   Eigen::VectorXd pull;
@@ -28,9 +29,10 @@ struct Residual {
     // A compliant clamp's pull holds the body at every load step: it is a support,
     // not a load.
     model.clamp_pull(t, false, pull);
-    g = out.force - pull - s * model.external_force();
+    g = out.force - pull - s * load_fraction * model.external_force();
     if (energy)
-      *energy = out.energy + model.clamp_spring_energy(t, x) - s * model.external_force().dot(xf);
+      *energy = out.energy + model.clamp_spring_energy(t, x) -
+                s * load_fraction * model.external_force().dot(xf);
     return true;
   }
 };
@@ -49,7 +51,7 @@ Eigen::VectorXd rigid_initial_guess(const FemModel& model, double t) {
 StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_free,
                           const StaticOptions& opt) {
   StaticResult res;
-  Residual R{model, t, {}, {}, {}, {}};
+  Residual R{model, t, opt.load_fraction, {}, {}, {}, {}};
   Eigen::VectorXd g, g_trial, x_trial;
   if (!R.eval(x_free, 1.0, false, g)) {
     res.message =
@@ -57,7 +59,8 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
     return res;
   }
   // Forces are compared to the load, or to the initial imbalance when there is no load.
-  const double scale = std::max({model.external_force().norm(), g.norm(), 1e-300});
+  const double scale =
+      std::max({opt.load_fraction * model.external_force().norm(), g.norm(), 1e-300});
   // Newton corrections below this length (1e-12 of the body's size) are round-off.
   const Eigen::Matrix3Xd& X = model.mesh().nodes;
   const double negligible = 1e-12 * (X.rowwise().maxCoeff() - X.rowwise().minCoeff()).norm();

@@ -15,6 +15,9 @@ struct StaticOptions {
   double tolerance = 1e-10;  // ‖r − f_ext‖ relative to the load scale
   int max_iterations = 50;   // per load step
   int max_load_steps = 64;
+  /// The share of the external load (gravity, loads) to carry: incremental loading
+  /// (Bächer 2008, §6.1) solves a sequence of these.
+  double load_fraction = 1.0;
 };
 
 struct StaticResult {

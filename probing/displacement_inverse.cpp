@@ -205,6 +205,10 @@ DisplacementInverseResult displacement_based_inverse(std::vector<ObservedProbe>&
     result.stop = r == nlopt::MAXEVAL_REACHED ? "evaluation budget spent" : "converged";
   } catch (const nlopt::roundoff_limited&) {
     result.stop = "converged to round-off";
+  } catch (const std::runtime_error& e) {
+    // L-BFGS gives up this way when its line search finds no descent, which at a
+    // noise-free optimum is round-off too; the best point so far is kept.
+    result.stop = fmt::format("optimiser failure ({}) at the best point", e.what());
   }
   if (p.failed > 0)
     result.stop += fmt::format(" ({} trial(s) without a static equilibrium, the last: {})",

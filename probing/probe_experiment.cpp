@@ -4,7 +4,6 @@
 
 #include "engine/error.hpp"
 #include "engine/simulation.hpp"
-#include "engine/static_solver.hpp"
 
 namespace kelvin {
 
@@ -20,16 +19,7 @@ ProbeExperiment::ProbeExperiment(const Scenario& scenario, const ProbingSpec& sp
 }
 
 Eigen::Matrix3Xd ProbeExperiment::equilibrium(int m) {
-  FemModel& model = *models_[m];
-  Eigen::VectorXd x = rigid_initial_guess(model, 0);
-  const StaticResult r = solve_static(model, 0, x);
-  if (!r.converged)
-    throw Error(fmt::format("measurement '{}': no static equilibrium: {}",
-                            spec_.measurements[m].name, r.message));
-  Eigen::Matrix3Xd full, v;
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(x.size());
-  model.expand(0, x.data(), zero.data(), full, v);
-  return full;
+  return static_equilibrium(*models_[m], spec_.measurements[m].name);
 }
 
 std::vector<ObservedProbe> ProbeExperiment::observed() {

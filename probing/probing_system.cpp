@@ -7,6 +7,7 @@
 #include <array>
 
 #include "engine/error.hpp"
+#include "engine/static_solver.hpp"
 
 namespace kelvin {
 
@@ -22,6 +23,17 @@ int elastic_term(const FemModel& model) {
   }
   if (found < 0) throw Error("static probing: the material has no elastic term");
   return found;
+}
+
+Eigen::Matrix3Xd static_equilibrium(const FemModel& model, const std::string& measurement) {
+  Eigen::VectorXd x = rigid_initial_guess(model, 0);
+  const StaticResult r = solve_static(model, 0, x);
+  if (!r.converged)
+    throw Error(fmt::format("measurement '{}': no static equilibrium: {}", measurement, r.message));
+  Eigen::Matrix3Xd full, v;
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(x.size());
+  model.expand(0, x.data(), zero.data(), full, v);
+  return full;
 }
 
 std::vector<std::pair<int, int>> face_neighbours(const Mesh& mesh) {

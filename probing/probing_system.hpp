@@ -7,6 +7,7 @@
 /// which for a law linear in its parameters is the whole force: r = (∂r/∂θ) θ.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -26,6 +27,10 @@ int elastic_term(const FemModel& model);
 
 /// Group of each element and the number of groups.
 std::pair<std::vector<int>, int> element_groups(const Mesh& mesh, ElementGrouping grouping);
+
+/// Every node's static equilibrium position under the model's loads at its current
+/// parameters; throws kelvin::Error naming `measurement` when there is none.
+Eigen::Matrix3Xd static_equilibrium(const FemModel& model, const std::string& measurement);
 
 /// Pairs of elements that share a face.
 std::vector<std::pair<int, int>> face_neighbours(const Mesh& mesh);
