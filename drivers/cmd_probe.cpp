@@ -6,11 +6,14 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <memory>
 
 #include "drivers/commands.hpp"
 #include "engine/error.hpp"
 #include "engine/output.hpp"
+#include "probing/parameter_sets.hpp"
 #include "probing/probe_experiment.hpp"
+#include "probing/probing_system.hpp"
 
 namespace kelvin {
 namespace {
@@ -19,7 +22,43 @@ struct Args {
   std::string scenario, outdir = "out";
   std::string method, grouping;
   double gamma = -1;
+  bool sets = false, cross_validate = false;
+  std::string blend;              // a probe-fit output directory with sets/
+  std::string metric = "global";  // of the blend
+  double radius = 0;              // of the local metric (m); 0: twice the element size
 };
+
+BlendOptions blend_options(const Args& a) {
+  BlendOptions o;
+  o.metric = a.metric == "local" ? BlendMetric::kLocal : BlendMetric::kGlobal;
+  o.radius = a.radius;
+  return o;
+}
+
+/// The parameter sets of a probe-fit output directory (DIR/sets/*.csv, by name).
+std::vector<ParameterSet> read_sets(const std::string& dir, const FemModel& model) {
+  namespace fs = std::filesystem;
+  const fs::path where = fs::path(dir) / "sets";
+  std::error_code ec;
+  if (!fs::is_directory(where, ec))
+    throw Error(
+        fmt::format("--blend {}: no sets/ directory there (kelvin probe-fit --sets "
+                    "writes one)",
+                    dir));
+  std::vector<fs::path> files;
+  for (const auto& entry : fs::directory_iterator(where, ec))
+    if (entry.path().extension() == ".csv") files.push_back(entry.path());
+  std::sort(files.begin(), files.end());
+  if (files.empty()) throw Error(fmt::format("--blend {}: sets/ holds no .csv file", dir));
+  std::vector<std::string> names;
+  const int term = elastic_term(model);
+  for (const auto& info : model.terms()[term].model->params()) names.push_back(info.name);
+  std::vector<ParameterSet> sets;
+  for (const auto& f : files)
+    sets.push_back(
+        read_parameter_set(f.string(), f.stem().string(), names, model.mesh().num_tets()));
+  return sets;
+}
 
 std::string positions_csv(const std::vector<MarkerEmbedding>& markers, const Eigen::Matrix3Xd& x) {
   std::string s = "name,x,y,z\n";
@@ -45,9 +84,33 @@ void run_probe(const Args& a) {
   if (s.markers.embedded.empty())
     throw Error(fmt::format("{}: probe needs markers (markers.rest) to report", s.path));
   ProbeExperiment ex(s, load_probing(s));
+  std::unique_ptr<Blender> blender;
+  if (!a.blend.empty()) {
+    blender = std::make_unique<Blender>(s.mesh, read_sets(a.blend, ex.model(0)), blend_options(a));
+    std::string names;
+    for (const auto& set : blender->sets()) names += (names.empty() ? "" : ", ") + set.name;
+    fmt::print("blending {} parameter sets ({}) by the {} strain metric\n", blender->sets().size(),
+               names, a.metric);
+  }
   if (const std::string why = prepare_output_dir(a.outdir); !why.empty()) throw Error(why);
   for (int m = 0; m < ex.size(); ++m) {
-    const Eigen::Matrix3Xd x = ex.equilibrium(m);
+    Eigen::Matrix3Xd x;
+    if (blender) {
+      const BlendedEquilibrium b = blended_equilibrium(ex.model(m), *blender);
+      if (b.x.size() == 0)
+        throw Error(fmt::format("measurement '{}' with the blended sets: {}",
+                                ex.spec().measurements[m].name, b.message));
+      std::string mix;
+      const Eigen::VectorXd mean = b.weights.rowwise().mean();
+      for (int k = 0; k < mean.size(); ++k)
+        mix += fmt::format("{}{} {:.2f}", k ? ", " : "", blender->sets()[k].name, mean[k]);
+      fmt::print("{}: mean weights {}; {} passes at the full load{}\n",
+                 ex.spec().measurements[m].name, mix, b.passes,
+                 b.converged ? "" : " (" + b.message + ")");
+      x = b.x;
+    } else {
+      x = ex.equilibrium(m);
+    }
     const Eigen::Matrix3Xd at = marker_positions(s.mesh, s.markers.embedded, x);
     const Eigen::Matrix3Xd rest = marker_positions(s.mesh, s.markers.embedded, s.mesh.nodes);
     const std::string name = ex.spec().measurements[m].name;
@@ -114,6 +177,10 @@ void run_probe_fit(const Args& a) {
                     : a.grouping == "region" ? ElementGrouping::kRegion
                                              : ElementGrouping::kElement;
   if (a.gamma >= 0) spec.gamma = a.gamma;
+  if ((a.sets || a.cross_validate) && spec.method != "displacement")
+    throw Error(
+        "--sets and --cross-validate fit with the displacement-based inverse (method: "
+        "displacement)");
   for (const auto& m : spec.measurements)
     if (m.observed_path.empty())
       throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",
@@ -153,6 +220,51 @@ void run_probe_fit(const Args& a) {
   const std::string path = (std::filesystem::path(a.outdir) / "fitted-fields.csv").string();
   write_file_atomic(path, fields_csv(names, q));
   fmt::print("wrote {} (material.fields)\n", path);
+
+  std::vector<std::string> measurement_names;
+  for (const auto& m : spec.measurements) measurement_names.push_back(m.name);
+  DisplacementInverseOptions o;
+  o.grouping = spec.grouping;
+  o.gamma_space = std::max(spec.gamma, 0.0);
+  if (a.sets) {
+    // From the scenario's start values, like the fit above.
+    ProbeExperiment fresh(s, spec);
+    std::vector<ObservedProbe> probes = fresh.observed();
+    const auto sets = fit_parameter_sets(probes, measurement_names, o);
+    const std::filesystem::path dir = std::filesystem::path(a.outdir) / "sets";
+    std::filesystem::create_directories(dir);
+    fmt::print("one parameter set per measurement (kelvin probe --blend {}):\n", a.outdir);
+    for (const auto& set : sets) {
+      write_file_atomic((dir / (set.name + ".csv")).string(), parameter_set_csv(names, set));
+      print_values(names, set.q, group, groups);
+      fmt::print("    ({}: strain level {:.4f})\n", set.name, strain_level(s.mesh, set.strain));
+    }
+  }
+  if (a.cross_validate) {
+    ProbeExperiment fresh(s, spec);
+    std::vector<ObservedProbe> probes = fresh.observed();
+    BlendOptions global = blend_options(a), local = blend_options(a);
+    global.metric = BlendMetric::kGlobal, local.metric = BlendMetric::kLocal;
+    fmt::print("leave-one-out: each measurement predicted from the others (marker rms, mm)\n");
+    const auto folds = cross_validate_blending(probes, measurement_names, o, {global, local});
+    std::string csv = "held_out,one_set_mm,blended_strain_level_mm,blended_local_mm\n";
+    fmt::print("  {:<16} {:>10} {:>14} {:>12}\n", "held out", "one set", "blended level",
+               "blended local");
+    double sum[3] = {0, 0, 0};
+    for (const auto& f : folds) {
+      const double r[3] = {f.single_rms, f.blended[0].rms, f.blended[1].rms};
+      fmt::print("  {:<16} {:>10.4f} {:>14.4f} {:>12.4f}{}\n", f.held_out, 1e3 * r[0], 1e3 * r[1],
+                 1e3 * r[2],
+                 f.blended[0].converged && f.blended[1].converged ? "" : "  (weights not settled)");
+      csv +=
+          fmt::format("{},{:.6g},{:.6g},{:.6g}\n", f.held_out, 1e3 * r[0], 1e3 * r[1], 1e3 * r[2]);
+      for (int k = 0; k < 3; ++k) sum[k] += r[k] * r[k];
+    }
+    const double n = static_cast<double>(folds.size());
+    fmt::print("  {:<16} {:>10.4f} {:>14.4f} {:>12.4f}\n", "all", 1e3 * std::sqrt(sum[0] / n),
+               1e3 * std::sqrt(sum[1] / n), 1e3 * std::sqrt(sum[2] / n));
+    write_file_atomic((std::filesystem::path(a.outdir) / "cross-validation.csv").string(), csv);
+  }
 }
 
 }  // namespace
@@ -165,6 +277,17 @@ void register_probe(CLI::App& app, int& exit_code) {
       "equilibrium under its loads, and the markers' loaded positions (OUTDIR/<name>.csv).");
   sim->add_option("scenario", a->scenario, "scenario YAML with a probing: section")->required();
   sim->add_option("-o,--outdir", a->outdir, "output directory")->capture_default_str();
+  sim->add_option("--blend", a->blend,
+                  "a kelvin probe-fit --sets output directory: simulate with its parameter sets "
+                  "blended in strain space (Bächer 2008, ch. 6)");
+  sim->add_option("--metric", a->metric,
+                  "of the blend: global (the body's strain level; a homogeneous body) or local "
+                  "(each element's neighbourhood; an inhomogeneous one)")
+      ->check(CLI::IsMember({"global", "local"}))
+      ->capture_default_str();
+  sim->add_option("--radius", a->radius,
+                  "the local metric's radius in space (m); default twice the element size")
+      ->check(positive_number(false));
   sim->callback([a, &exit_code] { guarded(exit_code, [&] { run_probe(*a); }); });
 
   CLI::App* fit = app.add_subcommand(
@@ -180,6 +303,12 @@ void register_probe(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"global", "region", "element"}));
   fit->add_option("--gamma", a->gamma, "smoothness across element faces (relative)")
       ->check(positive_number(true));
+  fit->add_flag("--sets", a->sets,
+                "also fit one parameter set per measurement (OUTDIR/sets/), for kelvin probe "
+                "--blend");
+  fit->add_flag("--cross-validate", a->cross_validate,
+                "leave each measurement out in turn: predict it from one set fitted to the "
+                "others and from their per-measurement sets blended (OUTDIR/cross-validation.csv)");
   fit->callback([a, &exit_code] { guarded(exit_code, [&] { run_probe_fit(*a); }); });
 }
 

@@ -175,12 +175,14 @@ BlendedEquilibrium blended_equilibrium(FemModel& model, const Blender& blender) 
     model.terms()[term].q = blender.parameters(out.weights);
     if (!solve(static_cast<double>(k) / increments)) return out;
   }
-  // At the full load, until the weights the strain asks for are the ones it was made with.
+  // At the full load, until the weights the strain asks for are the ones it was made
+  // with. Each pass moves halfway to them (a Mann iteration): a plain fixed-point
+  // iteration can cycle between two sets when their strain levels are close.
   for (out.passes = 0; out.passes < options.max_passes; ++out.passes) {
     const Eigen::MatrixXd w = blender.weights(element_strains(mesh, x));
     out.change = (w - out.weights).cwiseAbs().maxCoeff();
-    out.weights = w;
     if (out.change <= options.tolerance) break;
+    out.weights = out.passes == 0 ? w : 0.5 * (w + out.weights);
     model.terms()[term].q = blender.parameters(out.weights);
     if (!solve(1.0)) return out;
   }

@@ -15,7 +15,8 @@
 /// h is the sets' own spacing in that distance (median nearest-neighbour distance).
 /// The weights depend on the strain and the strain on the weights: the contact is
 /// loaded in increments, the weights of each from the strain of the one before,
-/// then passes at the full load until the weights settle.
+/// then passes at the full load, each halfway to the weights the strain asks for,
+/// until they settle.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -46,7 +47,7 @@ struct BlendOptions {
   /// element size (the cube root of the mean element volume).
   double radius = 0;
   int increments = 8;       // load increments
-  int max_passes = 20;      // at the full load
+  int max_passes = 40;      // at the full load
   double tolerance = 1e-4;  // on the largest change of a weight between passes
 };
 

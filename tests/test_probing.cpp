@@ -5,11 +5,13 @@
 // stiff inclusion found where it is by the per-element fit with the L-curve.
 // Displacement-based: recovery from surface markers alone, and the comparison of
 // the two with marker noise.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <random>
 
@@ -453,4 +455,68 @@ TEST(ProbeCli, SimulatesTheExamplesMeasurementsToWithinTheirNoise) {
     const MarkerRest rest = read_marker_rest(dir + "markers.csv");
     EXPECT_GT((sim.positions - rest.positions).colwise().norm().maxCoeff(), 2e-3) << name;
   }
+}
+
+TEST(ProbeCli, BlendsTheSetsProbeFitWroteAndEachMeasurementTakesItsOwn) {
+  // Three depths of the depths example on a coarse block: probe-fit --sets writes one
+  // set per depth, probe --blend simulates each depth with the blend, and a depth's
+  // own set carries most of its weight.
+  const auto dir = test::scratch("probe-blend");
+  const std::string data = KELVIN_SOURCE_DIR "/yaml/examples/";
+  std::string probing = "probing:\n  measurements:\n";
+  const char* const depths[3] = {"0.5", "1.5", "2.5"};
+  for (const char* f : depths)
+    probing += fmt::format(
+        "    - {{ name: c{0}, loads: [{{ name: p, select: {{ box: {{ lo: [0.014, 0.014, 0.0199], "
+        "hi: [0.026, 0.026, 0.0201] }} }}, force: [0, 0, -{0}] }}], observed: "
+        "{1}probe-foam-depths/centre-{0}N.csv }}\n",
+        f, data);
+  test::write_text(dir / "s.yaml",
+                   "mesh: { generate: box, lo: [0, 0, 0], hi: [0.04, 0.04, 0.02], "
+                   "element_size: 0.01 }\n"
+                   "material: { density: 60, elastic: { model: corotational, lambda: 2e4, mu: "
+                   "1e4 } }\n"
+                   "clamps: [{ name: table, select: { plane: { axis: z, at: 0 } } }]\n"
+                   "markers: { rest: " +
+                       data + "probe-foam-block/markers.csv }\n" + probing);
+  const std::string s = (dir / "s.yaml").string();
+  test::CliRun r = test::run_kelvin("probe-fit " + s + " -o " + (dir / "fit").string() + " --sets");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  for (const char* f : depths) {
+    const std::string set = test::read_text(dir / "fit" / "sets" / fmt::format("c{}.csv", f));
+    EXPECT_EQ(set.rfind("element,elastic.lambda,elastic.mu,strain.E11,", 0), 0u) << set;
+    EXPECT_EQ(std::count(set.begin(), set.end(), '\n'), 1 + 192);
+  }
+  r = test::run_kelvin("probe " + s + " -o " + (dir / "sim").string() + " --blend " +
+                       (dir / "fit").string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("blending 3 parameter sets (c0.5, c1.5, c2.5) by the global strain metric"),
+            std::string::npos)
+      << r.out;
+  for (int k = 0; k < 3; ++k) {
+    const auto at = r.out.find(fmt::format("c{}: mean weights", depths[k]));
+    ASSERT_NE(at, std::string::npos) << r.out;
+    double w[3];
+    ASSERT_EQ(std::sscanf(r.out.c_str() + at + std::strlen("c0.5: mean weights"),
+                          " c0.5 %lf, c1.5 %lf, c2.5 %lf", &w[0], &w[1], &w[2]),
+              3)
+        << r.out;
+    for (int j = 0; j < 3; ++j) {
+      if (j == k) continue;
+      EXPECT_GT(w[k], w[j]) << depths[k] << " N: " << r.out;
+    }
+    EXPECT_TRUE(std::filesystem::exists(dir / "sim" / fmt::format("c{}.csv", depths[k])));
+  }
+  // A directory without sets, and a set of another material, are named.
+  r = test::run_kelvin("probe " + s + " -o " + (dir / "sim2").string() + " --blend " +
+                       dir.string());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("no sets/ directory there"), std::string::npos) << r.out;
+  test::write_text(dir / "fit" / "sets" / "c0.5.csv", "element,elastic.E,elastic.nu\n0,1,0.3\n");
+  r = test::run_kelvin("probe " + s + " -o " + (dir / "sim2").string() + " --blend " +
+                       (dir / "fit").string());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("c0.5.csv:1: the header must be element,elastic.lambda,elastic.mu,strain"),
+            std::string::npos)
+      << r.out;
 }
