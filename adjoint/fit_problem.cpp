@@ -7,6 +7,7 @@
 
 #include "engine/error.hpp"
 #include "materials/material.hpp"
+#include "probing/probe_experiment.hpp"
 
 namespace kelvin {
 
@@ -40,7 +41,12 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
           "experiments of one fit share the specimen's mesh",
           scenario.path, other.path, other.mesh.num_tets(), scenario.path,
           scenario.mesh.num_tets()));
-    experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
+    // A probing scenario adds its static measurements, and its captured motion when it
+    // has one too.
+    const bool probing = has_probing(other);
+    if (!probing || !other.markers.observed.names.empty())
+      experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
+    if (probing) add_static_terms(scenario, other);
   }
   map_ = std::make_unique<ParameterMap>(specs, scenario, experiments_[0]->model(),
                                         experiments_[0]->objective().names());
@@ -52,6 +58,29 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
         "{}: fit.experiments: a body force (body_force.x|y|z) explains one motion; fit it on "
         "one experiment, not jointly with {}",
         scenario.path, experiments_[1]->scenario().path));
+  for (const ParamSlot& slot : map_->slots())
+    if (!statics_.empty() && (slot.is_clamp() || slot.is_force()))
+      throw Error(fmt::format(
+          "{}: fit.parameters: clamp compliances and body forces belong to one captured motion; "
+          "a fit with static measurements ({}) cannot carry them",
+          scenario.path, statics_[0]->name()));
+  if (!statics_.empty() && !map_->observation_blocks().empty())
+    throw Error(fmt::format(
+        "{}: fit.parameters: markers.* parameters belong to captured tracks; a fit with static "
+        "measurements ({}) cannot carry them yet",
+        scenario.path, statics_[0]->name()));
+  for (const auto& st : statics_) {
+    const auto& mine = experiments_[0]->model().terms();
+    const auto& theirs = st->model().terms();
+    bool same = mine.size() == theirs.size();
+    for (size_t k = 0; same && k < mine.size(); ++k)
+      same = mine[k].model->name() == theirs[k].model->name();
+    if (!same)
+      throw Error(fmt::format(
+          "{}: fit.experiments: static measurement '{}' has other material models than {}; "
+          "experiments fitted jointly share the fitted parameters",
+          scenario.path, st->name(), scenario.path));
+  }
   const auto& terms = experiments_[0]->model().terms();
   for (size_t e = 1; e < experiments_.size(); ++e) {
     const auto& other = experiments_[e]->model().terms();
@@ -83,6 +112,24 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
   }
 }
 
+FitProblem::~FitProblem() = default;
+
+void FitProblem::add_static_terms(const Scenario& main, const Scenario& probing) {
+  const ProbingSpec spec = load_probing(probing);
+  // Each measurement weighs like a captured track as long as the fitted one.
+  const double weight = spec.weight > 0 ? spec.weight : main.time.end;
+  for (const auto& m : spec.measurements)
+    if (m.observed_path.empty())
+      throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",
+                              probing.path, m.name));
+  probes_.push_back(std::make_unique<ProbeExperiment>(probing, spec));
+  ProbeExperiment& ex = *probes_.back();
+  for (int m = 0; m < ex.size(); ++m)
+    statics_.push_back(std::make_unique<StaticTerm>(ex.model(m), spec.measurements[m].name,
+                                                    ex.scenario().markers.embedded,
+                                                    spec.measurements[m].observed, weight));
+}
+
 Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   Evaluation ev;
@@ -103,6 +150,14 @@ Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions&
       weighted_time += ex->objective().weighted_observed_time(i);
     if (r.ok && r.gradient.size()) ev.gradient += r.gradient;
     ev.experiments.push_back(std::move(r));
+  }
+  for (auto& st : statics_) {
+    StaticTermResult r = st->evaluate(*map_, p, options.method != GradientMethod::kNone);
+    if (!r.ok && ev.ok) ev.ok = false, ev.error = r.error;
+    ev.phi += r.phi;
+    weighted_time += st->weight() * st->observed_markers();
+    if (r.ok && r.gradient.size()) ev.gradient += r.gradient;
+    ev.statics.push_back(std::move(r));
   }
   ev.rms = std::sqrt(2 * ev.phi / weighted_time);
   ev.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -2,7 +2,9 @@
 /// \file
 /// Φ(p) and dΦ/dp over every experiment of a fit: the main scenario and the
 /// further captured motions listed in its `fit.experiments`, all sharing one
-/// parameter map (the same specimen in different motions; Φ is their sum).
+/// parameter map (the same specimen in different motions; Φ is their sum). A
+/// scenario of `fit.experiments` with a `probing:` section adds its static
+/// measurements (StaticTerm): the specimen probed as well as shaken.
 #include <Eigen/Core>
 #include <memory>
 #include <string>
@@ -10,9 +12,12 @@
 
 #include "adjoint/experiment.hpp"
 #include "adjoint/parameter_map.hpp"
+#include "adjoint/static_term.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
+
+class ProbeExperiment;
 
 /// Every elastic and viscous parameter and nothing else, global, log-transformed
 /// where the model declares it positive: the map used when a scenario has no
@@ -26,6 +31,7 @@ struct Evaluation {
   double rms = 0;            // over all experiments (m)
   Eigen::VectorXd gradient;  // dΦ/dp (empty without a gradient)
   std::vector<ExperimentResult> experiments;
+  std::vector<StaticTermResult> statics;  // per static measurement
   double seconds = 0;
 };
 
@@ -36,17 +42,24 @@ class FitProblem {
   /// The scenario must outlive the problem (a temporary would not).
   FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs = {});
   FitProblem(Scenario&&, std::vector<FitParameterSpec> = {}) = delete;
+  ~FitProblem();
 
   const ParameterMap& map() const { return *map_; }
   int num_experiments() const { return static_cast<int>(experiments_.size()); }
   Experiment& experiment(int i) { return *experiments_[i]; }
+  int num_static_terms() const { return static_cast<int>(statics_.size()); }
+  StaticTerm& static_term(int i) { return *statics_[i]; }
 
   Evaluation evaluate(const Eigen::VectorXd& p, const GradientOptions& options);
 
  private:
   std::vector<std::unique_ptr<Scenario>> owned_;  // experiments loaded here
   std::vector<std::unique_ptr<Experiment>> experiments_;
+  std::vector<std::unique_ptr<ProbeExperiment>> probes_;  // the static terms' models
+  std::vector<std::unique_ptr<StaticTerm>> statics_;
   std::unique_ptr<ParameterMap> map_;
+  /// Adds the static measurements of `probing` (a loaded scenario of fit.experiments).
+  void add_static_terms(const Scenario& main, const Scenario& probing);
 };
 
 }  // namespace kelvin

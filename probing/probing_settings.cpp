@@ -15,12 +15,17 @@ namespace kelvin {
 using yamlutil::index;
 using yamlutil::join;
 
+bool has_probing(const Scenario& s) {
+  const yamlutil::Doc d(s.path);
+  return d.root().IsMap() && d.root()["probing"];
+}
+
 ProbingSpec load_probing(const Scenario& s) {
   const yamlutil::Doc d(s.path);
   const YAML::Node root = d.required(d.root(), "", "probing");
   const std::string P = "probing";
   d.require_map(root, P);
-  d.check_keys(root, P, {"measurements", "method", "grouping", "gamma"});
+  d.check_keys(root, P, {"measurements", "method", "grouping", "gamma", "weight"});
   ProbingSpec spec;
   if (const YAML::Node n = root["method"])
     spec.method = d.choice(n, join(P, "method"), {"displacement", "force"});
@@ -31,6 +36,7 @@ ProbingSpec load_probing(const Scenario& s) {
                                     : ElementGrouping::kElement;
   }
   if (const YAML::Node n = root["gamma"]) spec.gamma = d.non_negative(n, join(P, "gamma"), "");
+  if (const YAML::Node n = root["weight"]) spec.weight = d.positive(n, join(P, "weight"), "s");
   const YAML::Node ms = d.required(root, P, "measurements");
   d.require_sequence(ms, join(P, "measurements"));
   if (ms.size() == 0) d.fail(ms, join(P, "measurements"), "needs at least one measurement");

@@ -26,7 +26,13 @@ struct ProbingSpec {
   std::string method = "displacement";  // displacement | force
   ElementGrouping grouping = ElementGrouping::kGlobal;
   double gamma = -1;  // smoothness (relative); < 0: the L-curve (force) or 0 (displacement)
+  /// In a fit with captured motion: each measurement weighs like this many seconds
+  /// of a captured track of its markers; < 0: the fitted scenario's duration.
+  double weight = -1;
 };
+
+/// True when the scenario file has a `probing:` section.
+bool has_probing(const Scenario& scenario);
 
 /// Reads `probing:` from the scenario file (after load_scenario succeeded on it).
 /// Throws kelvin::Error "file:line:col: probing...: why" for a bad entry.

@@ -1,0 +1,55 @@
+#pragma once
+/// \file
+/// A static probing measurement as a term of a fit (Bächer 2008 next to captured
+/// motion: the same specimen probed and shaken). Its misfit
+///   Φ_s = w ½ Σ_j ‖x_j(q(p)) − x̄_j‖²,
+/// x the equilibrium under the measurement's loads, weighs like w seconds of a
+/// captured track of the same markers (Φ of a track is ½ ∫ ‖r‖² dt), so the fit's
+/// RMS stays a distance. Its gradient comes from the adjoint of the equilibrium
+/// R(x; q) = r(x) − f_ext = 0: K λ = w Σ_j W_jᵀ r_j, dΦ_s/dq = −λᵀ ∂R/∂q, one solve
+/// with the tangent already assembled, chained through the fit's parameter map.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "adjoint/parameter_map.hpp"
+#include "engine/fem_model.hpp"
+#include "engine/markers.hpp"
+
+namespace kelvin {
+
+struct StaticTermResult {
+  bool ok = false;
+  std::string error;  // why there is no equilibrium (names the measurement)
+  double phi = 0;
+  double rms = 0;            // marker distance (m), 3-D
+  Eigen::VectorXd gradient;  // dΦ_s/dp (empty without a gradient)
+};
+
+class StaticTerm {
+ public:
+  /// `model` (its loads: the scenario's plus the probe's) must outlive the term and
+  /// share the fitted material models; `observed` is 3 × markers, NaN = occluded.
+  StaticTerm(FemModel& model, std::string name, std::vector<MarkerEmbedding> markers,
+             Eigen::Matrix3Xd observed, double weight);
+
+  const std::string& name() const { return name_; }
+  double weight() const { return weight_; }
+  int observed_markers() const { return observed_count_; }
+  FemModel& model() { return model_; }
+
+  /// Φ_s and, when asked, dΦ_s/dp at p (applied to the model first). A trial without
+  /// an equilibrium is reported, not thrown: the fitter backs off from it.
+  StaticTermResult evaluate(const ParameterMap& map, const Eigen::VectorXd& p, bool gradient);
+
+ private:
+  FemModel& model_;
+  std::string name_;
+  std::vector<MarkerEmbedding> markers_;
+  Eigen::Matrix3Xd observed_;
+  double weight_;
+  int observed_count_ = 0;
+  Eigen::VectorXd x_free_;  // the last equilibrium: the next trial's start
+};
+
+}  // namespace kelvin
