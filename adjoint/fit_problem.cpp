@@ -29,7 +29,13 @@ std::vector<FitParameterSpec> default_fit_parameters(const Scenario& s) {
 
 FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs) {
   if (specs.empty()) specs = default_fit_parameters(scenario);
-  experiments_.push_back(std::make_unique<Experiment>(scenario, scenario.fit.objective));
+  scenario_ = &scenario;
+  // A scenario of static measurements alone is fitted to them; one with captured
+  // tracks too to both.
+  const bool probed = has_probing(scenario);
+  if (!probed || !scenario.markers.observed.names.empty())
+    experiments_.push_back(std::make_unique<Experiment>(scenario, scenario.fit.objective));
+  if (probed) add_static_terms(scenario, scenario);
   const auto dir = std::filesystem::path(scenario.path).parent_path();
   for (const auto& file : scenario.fit.experiments) {
     owned_.push_back(std::make_unique<Scenario>(load_scenario((dir / file).string())));
@@ -48,8 +54,9 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
       experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
     if (probing) add_static_terms(scenario, other);
   }
-  map_ = std::make_unique<ParameterMap>(specs, scenario, experiments_[0]->model(),
-                                        experiments_[0]->objective().names());
+  map_ = std::make_unique<ParameterMap>(
+      specs, scenario, model(),
+      experiments_.empty() ? std::vector<std::string>{} : experiments_[0]->objective().names());
   // Joint experiments share the fitted parameters, so each must have the same
   // material models; otherwise a slot would name another model's parameter (found
   // here, not as a failed simulation at the first evaluation).
@@ -70,7 +77,7 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
         "measurements ({}) cannot carry them yet",
         scenario.path, statics_[0]->name()));
   for (const auto& st : statics_) {
-    const auto& mine = experiments_[0]->model().terms();
+    const auto& mine = model().terms();
     const auto& theirs = st->model().terms();
     bool same = mine.size() == theirs.size();
     for (size_t k = 0; same && k < mine.size(); ++k)
@@ -81,7 +88,7 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
           "experiments fitted jointly share the fitted parameters",
           scenario.path, st->name(), scenario.path));
   }
-  const auto& terms = experiments_[0]->model().terms();
+  const auto& terms = model().terms();
   for (size_t e = 1; e < experiments_.size(); ++e) {
     const auto& other = experiments_[e]->model().terms();
     for (const ParamSlot& slot : map_->slots()) {
@@ -114,10 +121,17 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
 
 FitProblem::~FitProblem() = default;
 
+FemModel& FitProblem::model() {
+  return experiments_.empty() ? statics_[0]->model() : experiments_[0]->model();
+}
+
 void FitProblem::add_static_terms(const Scenario& main, const Scenario& probing) {
   const ProbingSpec spec = load_probing(probing);
-  // Each measurement weighs like a captured track as long as the fitted one.
-  const double weight = spec.weight > 0 ? spec.weight : main.time.end;
+  // Each measurement weighs like a captured track as long as the fitted one (alone,
+  // any weight is the same fit).
+  const double weight = spec.weight > 0           ? spec.weight
+                        : experiments_.empty() || !(main.time.end > 0) ? 1.0
+                                                                      : main.time.end;
   for (const auto& m : spec.measurements)
     if (m.observed_path.empty())
       throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",

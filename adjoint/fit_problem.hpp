@@ -39,12 +39,20 @@ class FitProblem {
  public:
   /// Loads the experiments of `scenario.fit.experiments` (paths relative to the
   /// scenario) and builds the map of `specs` (default_fit_parameters when empty).
+  /// Static measurements come from a `probing:` section of the scenario or of its
+  /// experiments; a scenario without tracks is then fitted to them alone.
   /// The scenario must outlive the problem (a temporary would not).
   FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs = {});
   FitProblem(Scenario&&, std::vector<FitParameterSpec> = {}) = delete;
   ~FitProblem();
 
   const ParameterMap& map() const { return *map_; }
+  /// The fitted scenario, and the model the map was built on (the first captured
+  /// motion's, or the first static measurement's when there is none): the one
+  /// outputs write the fitted fields of.
+  const Scenario& scenario() const { return *scenario_; }
+  FemModel& model();
+  const Mesh& mesh() const { return scenario_->mesh; }
   int num_experiments() const { return static_cast<int>(experiments_.size()); }
   Experiment& experiment(int i) { return *experiments_[i]; }
   int num_static_terms() const { return static_cast<int>(statics_.size()); }
@@ -53,6 +61,7 @@ class FitProblem {
   Evaluation evaluate(const Eigen::VectorXd& p, const GradientOptions& options);
 
  private:
+  const Scenario* scenario_ = nullptr;
   std::vector<std::unique_ptr<Scenario>> owned_;  // experiments loaded here
   std::vector<std::unique_ptr<Experiment>> experiments_;
   std::vector<std::unique_ptr<ProbeExperiment>> probes_;  // the static terms' models

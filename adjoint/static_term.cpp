@@ -5,6 +5,7 @@
 #include <Eigen/CholmodSupport>
 #include <Eigen/KLUSupport>
 #include <cmath>
+#include <memory>
 
 #include "engine/param_derivatives.hpp"
 #include "engine/static_solver.hpp"
@@ -22,9 +23,8 @@ StaticTerm::StaticTerm(FemModel& model, std::string name, std::vector<MarkerEmbe
   x_free_ = rigid_initial_guess(model_, 0);
 }
 
-StaticTermResult StaticTerm::evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
-                                      bool gradient) {
-  StaticTermResult out;
+bool StaticTerm::equilibrium(const ParameterMap& map, const Eigen::VectorXd& p, Eigen::Matrix3Xd& x,
+                             std::string& error) {
   map.apply(p, model_);
   StaticResult s = solve_static(model_, 0, x_free_);
   if (!s.converged) {  // the last equilibrium may be a poor start for these parameters
@@ -32,13 +32,50 @@ StaticTermResult StaticTerm::evaluate(const ParameterMap& map, const Eigen::Vect
     s = solve_static(model_, 0, x_free_);
   }
   if (!s.converged) {
-    out.error = fmt::format("static measurement '{}': {}", name_, s.message);
-    return out;
+    error = fmt::format("static measurement '{}': {}", name_, s.message);
+    return false;
   }
-  const Mesh& mesh = model_.mesh();
-  Eigen::Matrix3Xd x, v;
+  Eigen::Matrix3Xd v;
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(x_free_.size());
   model_.expand(0, x_free_.data(), zero.data(), x, v);
+  return true;
+}
+
+bool StaticTerm::factor_stiffness(const Eigen::Matrix3Xd& x, std::string& error) {
+  AssemblyRequest req;
+  req.force = false, req.stiffness = true;
+  AssemblyOutput k;
+  const Eigen::Matrix3Xd v = Eigen::Matrix3Xd::Zero(3, x.cols());
+  if (!model_.assemble(x, v, req, k)) {
+    error = fmt::format("static measurement '{}': element {} is inadmissible at equilibrium", name_,
+                        k.failed_element);
+    return false;
+  }
+  const Eigen::SparseMatrix<double> K = to_sparse_matrix(model_.pattern(), k.K);
+  // K is symmetric positive definite at a stable equilibrium; LU where it is not.
+  using Cholesky = Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower>;
+  auto cholesky = std::make_shared<Cholesky>();
+  cholesky->cholmod().print = 0;
+  cholesky->compute(K);
+  if (cholesky->info() == Eigen::Success) {
+    solve_ = [cholesky](const Eigen::VectorXd& b) -> Eigen::VectorXd { return cholesky->solve(b); };
+    return true;
+  }
+  auto klu = std::make_shared<Eigen::KLU<Eigen::SparseMatrix<double>>>(K);
+  if (klu->info() == Eigen::Success) {
+    solve_ = [klu](const Eigen::VectorXd& b) -> Eigen::VectorXd { return klu->solve(b); };
+    return true;
+  }
+  error = fmt::format("static measurement '{}': the stiffness at equilibrium is singular", name_);
+  return false;
+}
+
+StaticTermResult StaticTerm::evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
+                                      bool gradient) {
+  StaticTermResult out;
+  Eigen::Matrix3Xd x;
+  if (!equilibrium(map, p, x, out.error)) return out;
+  const Mesh& mesh = model_.mesh();
   const Eigen::Matrix3Xd at = marker_positions(mesh, markers_, x);
   Eigen::Matrix3Xd pull = Eigen::Matrix3Xd::Zero(3, mesh.num_nodes());
   double sum = 0;
@@ -54,39 +91,23 @@ StaticTermResult StaticTerm::evaluate(const ParameterMap& map, const Eigen::Vect
   out.ok = true;
   if (!gradient) return out;
 
-  AssemblyRequest req;
-  req.force = false, req.stiffness = true;
-  AssemblyOutput k;
-  if (!model_.assemble(x, v, req, k)) {
+  if (!factor_stiffness(x, out.error)) {
     out.ok = false;
-    out.error = fmt::format("static measurement '{}': element {} is inadmissible at equilibrium",
-                            name_, k.failed_element);
     return out;
   }
-  const Eigen::SparseMatrix<double> K = to_sparse_matrix(model_.pattern(), k.K);
-  Eigen::VectorXd rhs(model_.num_dofs()), lambda;
+  Eigen::VectorXd rhs(model_.num_dofs());
   model_.restrict(pull, rhs.data());
-  // K is symmetric positive definite at a stable equilibrium; LU where it is not.
-  Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower> cholesky;
-  cholesky.cholmod().print = 0;
-  cholesky.compute(K);
-  if (cholesky.info() == Eigen::Success) {
-    lambda = cholesky.solve(rhs);
-  } else {
-    Eigen::KLU<Eigen::SparseMatrix<double>> klu(K);
-    if (klu.info() == Eigen::Success) lambda = klu.solve(rhs);
-  }
-  if (lambda.size() == 0 || !lambda.allFinite()) {
+  const Eigen::VectorXd lambda = solve_(rhs);
+  if (!lambda.allFinite()) {
     out.ok = false;
-    out.error =
-        fmt::format("static measurement '{}': the stiffness at equilibrium is singular", name_);
+    out.error = fmt::format("static measurement '{}': the adjoint solve failed", name_);
     return out;
   }
   out.gradient = Eigen::VectorXd::Zero(map.size());
   ParamDerivatives deriv(model_, map.slots());
   const auto& elements = model_.elements();
-  const Eigen::Matrix3Xd a = Eigen::Matrix3Xd::Zero(3, mesh.num_nodes());
-  const bool ok = deriv.for_each(0, x, v, a, [&](int e, int s, const Vec12& dR) {
+  const Eigen::Matrix3Xd v = Eigen::Matrix3Xd::Zero(3, mesh.num_nodes());
+  const bool ok = deriv.for_each(0, x, v, v, [&](int e, int s, const Vec12& dR) {
     double c = 0;
     for (int i = 0; i < 12; ++i)
       if (const int d = model_.dof(elements[e].nodes[i / 3], i % 3); d >= 0) c += lambda[d] * dR[i];
@@ -97,6 +118,54 @@ StaticTermResult StaticTerm::evaluate(const ParameterMap& map, const Eigen::Vect
     out.error = fmt::format("static measurement '{}': a material rejects the equilibrium", name_);
   }
   return out;
+}
+
+bool StaticTerm::residuals(const ParameterMap& map, const Eigen::VectorXd& p, bool with_jacobian,
+                           Eigen::VectorXd& r, Eigen::MatrixXd& jacobian,
+                           std::vector<std::pair<int, int>>& coordinates, std::string& error) {
+  Eigen::Matrix3Xd x;
+  if (!equilibrium(map, p, x, error)) return false;
+  const Mesh& mesh = model_.mesh();
+  const Eigen::Matrix3Xd at = marker_positions(mesh, markers_, x);
+  coordinates.clear();
+  std::vector<double> values;
+  for (int j = 0; j < at.cols(); ++j)
+    for (int c = 0; c < 3; ++c)
+      if (std::isfinite(observed_(c, j))) {
+        coordinates.emplace_back(j, c);
+        values.push_back(at(c, j) - observed_(c, j));
+      }
+  r = Eigen::Map<const Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
+  jacobian.resize(0, map.size());
+  if (!with_jacobian) return true;
+  if (!factor_stiffness(x, error)) return false;
+  // B = ∂R/∂p over the free dofs, then dx/dp = −K⁻¹ B column by column.
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(model_.num_dofs(), map.size());
+  ParamDerivatives deriv(model_, map.slots());
+  const auto& elements = model_.elements();
+  const Eigen::Matrix3Xd v = Eigen::Matrix3Xd::Zero(3, mesh.num_nodes());
+  const bool ok = deriv.for_each(0, x, v, v, [&](int e, int s, const Vec12& dR) {
+    map.for_each_dependency(p, s, e, [&](int j, double dq) {
+      for (int i = 0; i < 12; ++i)
+        if (const int d = model_.dof(elements[e].nodes[i / 3], i % 3); d >= 0)
+          B(d, j) += dq * dR[i];
+    });
+  });
+  if (!ok) {
+    error = fmt::format("static measurement '{}': a material rejects the equilibrium", name_);
+    return false;
+  }
+  jacobian.setZero(static_cast<Eigen::Index>(coordinates.size()), map.size());
+  for (int j = 0; j < map.size(); ++j) {
+    const Eigen::VectorXd dx = -solve_(B.col(j));
+    for (size_t k = 0; k < coordinates.size(); ++k) {
+      const auto [m, c] = coordinates[k];
+      for (int a = 0; a < 4; ++a)
+        if (const int d = model_.dof(mesh.tets(a, markers_[m].tet), c); d >= 0)
+          jacobian(static_cast<Eigen::Index>(k), j) += markers_[m].weights[a] * dx[d];
+    }
+  }
+  return true;
 }
 
 }  // namespace kelvin

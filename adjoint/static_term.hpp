@@ -9,7 +9,9 @@
 /// R(x; q) = r(x) − f_ext = 0: K λ = w Σ_j W_jᵀ r_j, dΦ_s/dq = −λᵀ ∂R/∂q, one solve
 /// with the tangent already assembled, chained through the fit's parameter map.
 #include <Eigen/Core>
+#include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "adjoint/parameter_map.hpp"
@@ -42,6 +44,14 @@ class StaticTerm {
   /// an equilibrium is reported, not thrown: the fitter backs off from it.
   StaticTermResult evaluate(const ParameterMap& map, const Eigen::VectorXd& p, bool gradient);
 
+  /// For Gauss–Newton: the residuals x_j − x̄_j of the observed coordinates (NaN ones
+  /// left out; `coordinates` gets (marker, axis) of each) and, when asked, their
+  /// Jacobian dr/dp = −W K⁻¹ ∂R/∂p (one solve per parameter with one factorisation).
+  /// False with `error` set when there is no equilibrium.
+  bool residuals(const ParameterMap& map, const Eigen::VectorXd& p, bool with_jacobian,
+                 Eigen::VectorXd& r, Eigen::MatrixXd& jacobian,
+                 std::vector<std::pair<int, int>>& coordinates, std::string& error);
+
  private:
   FemModel& model_;
   std::string name_;
@@ -50,6 +60,15 @@ class StaticTerm {
   double weight_;
   int observed_count_ = 0;
   Eigen::VectorXd x_free_;  // the last equilibrium: the next trial's start
+
+  /// Applies p and solves for the equilibrium (full positions into x); false with a
+  /// message naming the measurement when there is none.
+  bool equilibrium(const ParameterMap& map, const Eigen::VectorXd& p, Eigen::Matrix3Xd& x,
+                   std::string& error);
+  /// The tangent K over the free dofs at full positions x, factorised; false when
+  /// singular or an element is inadmissible.
+  bool factor_stiffness(const Eigen::Matrix3Xd& x, std::string& error);
+  std::function<Eigen::VectorXd(const Eigen::VectorXd&)> solve_;
 };
 
 }  // namespace kelvin

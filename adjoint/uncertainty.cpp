@@ -75,6 +75,26 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
         }
       }
   }
+  // Static measurements: a row per observed coordinate, weighted like w seconds of
+  // frames of the first captured motion (as Φ weighs them against its tracks).
+  double frame = 1;
+  if (problem.num_experiments() > 0) {
+    const auto& t = problem.experiment(0).scenario().markers.observed.times;
+    if (t.size() >= 2) frame = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
+  }
+  for (int k = 0; k < problem.num_static_terms(); ++k) {
+    StaticTerm& st = problem.static_term(k);
+    Eigen::VectorXd r;
+    Eigen::MatrixXd J;
+    std::vector<std::pair<int, int>> where;
+    if (!st.residuals(map, p, with_jacobian, r, J, where, g.error)) return g;
+    const double sw = std::sqrt(st.weight() / frame);
+    for (int i = 0; i < r.size(); ++i) {
+      residual.push_back(sw * r[i]);
+      if (with_jacobian) rows.push_back(sw * J.row(i));
+      g.samples.push_back({-1 - k, where[i].first, where[i].second, 0.0, sw});
+    }
+  }
   const int N = static_cast<int>(residual.size());
   g.residual = Eigen::Map<const Eigen::VectorXd>(residual.data(), N);
   g.jacobian.resize(with_jacobian ? N : 0, map.size());

@@ -36,8 +36,8 @@ struct UncertaintyAtPoint {
 
 /// Where a residual entry comes from.
 struct ResidualSample {
-  int experiment = 0;
-  int marker = 0;  // in the experiment's MarkerObjective::names()
+  int experiment = 0;  // −1 − k for the static measurement k (FitProblem::static_term)
+  int marker = 0;      // in the experiment's MarkerObjective::names()
   int axis = 0;
   double t = 0;            // capture frame (s)
   double sqrt_weight = 1;  // the residual entry is √wᵢ times the distance
@@ -47,7 +47,9 @@ struct ResidualSample {
 /// parameters applied, per observed coordinate of every experiment, at the capture
 /// frames in the objective's window) and their Jacobian J = dr/dp from one
 /// forward-sensitivity solve per experiment (observation entries from the
-/// objective's own derivatives).
+/// objective's own derivatives); then every static measurement's coordinates,
+/// weighted as Φ weighs them against the first motion's frames, with J from the
+/// linearised equilibrium.
 struct GaussNewtonSystem {
   bool ok = false;
   std::string error;

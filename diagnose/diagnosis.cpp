@@ -47,6 +47,12 @@ Model load_model(const std::string& source, const Scenario& nominal,
   m.extended = write_extended_scenario(source, nominal, with, screening, path, refit_form);
   m.scenario = std::make_unique<Scenario>(load_scenario(path));
   m.problem = std::make_unique<FitProblem>(*m.scenario, m.scenario->fit.parameters);
+  // The stages read residuals per marker, frame and frequency band of captured motion.
+  if (m.problem->num_static_terms() > 0)
+    throw Error(fmt::format(
+        "{}: fit.experiments: static measurements ('{}') are not diagnosed yet; diagnose the "
+        "captured motions and fit the static ones jointly with kelvin fit",
+        nominal.path, m.problem->static_term(0).name()));
   return m;
 }
 

@@ -469,7 +469,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   Context c{problem, options};
   c.opt = &opt;
   c.iteration = options.first_iteration;
-  if (options.smoothness > 0) c.pairs = map.neighbour_pairs(problem.experiment(0).scenario().mesh);
+  if (options.smoothness > 0) c.pairs = map.neighbour_pairs(problem.mesh());
   c.start = std::chrono::steady_clock::now();
 
   const Eigen::VectorXd lo = map.lower(), hi = map.upper();
@@ -696,7 +696,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
 std::vector<LcurvePoint> run_lcurve(FitProblem& problem, const Eigen::VectorXd& p0,
                                     std::vector<double> gammas, const FitOptions& options) {
   std::sort(gammas.begin(), gammas.end());
-  const auto pairs = problem.map().neighbour_pairs(problem.experiment(0).scenario().mesh);
+  const auto pairs = problem.map().neighbour_pairs(problem.mesh());
   std::vector<LcurvePoint> curve;
   Eigen::VectorXd p = p0;
   for (double gamma : gammas) {

@@ -103,7 +103,7 @@ std::string write_parameter_fields(FitProblem& problem, const FitSummary& s) {
   bool varies = false;
   for (const auto& b : map.blocks()) varies |= b.count > 1 && !b.slot.is_force();
   if (!varies) return "";
-  const Mesh& mesh = problem.experiment(0).scenario().mesh;
+  const Mesh& mesh = problem.mesh();
   std::vector<std::pair<std::string, Eigen::VectorXd>> fields;
   for (int k = 0; k < static_cast<int>(map.blocks().size()); ++k) {
     const ParameterBlock& b = map.blocks()[k];
@@ -131,7 +131,7 @@ std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
                               const std::atomic<bool>* interrupt) {
   const ParameterMap& map = problem.map();
   FitReportData data;
-  const Scenario& scenario = problem.experiment(0).scenario();
+  const Scenario& scenario = problem.scenario();
   data.title = scenario.name;
   data.scenario_path = scenario.path;
   data.algorithm = s.algorithm;
@@ -155,7 +155,7 @@ std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
   data.lcurve = s.lcurve;
 
   // fitted.yaml first: it is what the user came for, and needs no simulation.
-  FemModel& model = problem.experiment(0).model();
+  FemModel& model = problem.model();
   map.apply(s.best, model);
   write_fitted_scenario(scenario, map, model, s.outdir);
   data.files.push_back("fitted.yaml");

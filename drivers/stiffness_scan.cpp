@@ -16,7 +16,7 @@ constexpr int kHalfWidth = 7;    // ×0.21 … ×4.8: resonances ×0.46 … ×2.
 
 std::vector<int> modulus_entries(FitProblem& problem) {
   const ParameterMap& map = problem.map();
-  const FemModel& model = problem.experiment(0).model();
+  const FemModel& model = problem.model();
   std::vector<int> out;
   for (int j : map.model_entries()) {
     const ParameterBlock& b = map.block_of_entry(j);

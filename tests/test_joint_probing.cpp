@@ -5,8 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 
 #include "adjoint/fit_problem.hpp"
+#include "adjoint/uncertainty.hpp"
 #include "drivers/fit_loop.hpp"
 #include "engine/error.hpp"
 #include "test_support.hpp"
@@ -110,6 +113,48 @@ TEST(JointProbing, TheStaticTermsAdjointGradientMatchesCentralDifferences) {
   }
 }
 
+TEST(JointProbing, TheStaticResidualsJacobianMatchesCentralDifferences) {
+  // The Gauss–Newton rows of a static measurement (standard errors, scaled starts).
+  const path dir = test::scratch("joint-jacobian");
+  const std::string tracks = make_data(dir);
+  test::write_text(dir / "probed.yaml", probed(kStart, (dir / "static").string()));
+  test::write_text(dir / "fit.yaml",
+                   shaken(kStart, "  observed: " + tracks +
+                                      "\nfit:\n  parameters: [elastic.lambda, elastic.mu, "
+                                      "viscous.nu]\n  experiments: [probed.yaml]\n"));
+  const Scenario s = load_scenario((dir / "fit.yaml").string());
+  FitProblem problem(s, s.fit.parameters);
+  const Eigen::VectorXd p = problem.map().initial();
+  StaticTerm& term = problem.static_term(0);
+  Eigen::VectorXd r, up, down;
+  Eigen::MatrixXd J, unused;
+  std::vector<std::pair<int, int>> where;
+  std::string error;
+  ASSERT_TRUE(term.residuals(problem.map(), p, true, r, J, where, error)) << error;
+  ASSERT_EQ(r.size(), 12);  // 4 markers × 3 axes
+  ASSERT_EQ(J.rows(), 12);
+  // Φ_s is w/2 ‖r‖².
+  EXPECT_NEAR(0.5 * term.weight() * r.squaredNorm(), term.evaluate(problem.map(), p, false).phi,
+              1e-12 * r.squaredNorm());
+  for (int j = 0; j < p.size(); ++j) {
+    const double h = 1e-5;
+    Eigen::VectorXd pu = p, pd = p;
+    pu[j] += h, pd[j] -= h;
+    ASSERT_TRUE(term.residuals(problem.map(), pu, false, up, unused, where, error));
+    ASSERT_TRUE(term.residuals(problem.map(), pd, false, down, unused, where, error));
+    const Eigen::VectorXd fd = (up - down) / (2 * h);
+    EXPECT_LT((J.col(j) - fd).norm(), 1e-6 * J.norm() + 1e-15) << problem.map().label(j);
+  }
+  // The system the standard errors come from holds the captured frames and then the
+  // static coordinates, marked by their measurement.
+  const GaussNewtonSystem g = gauss_newton_system(problem, p);
+  ASSERT_TRUE(g.ok) << g.error;
+  int statics = 0;
+  for (const auto& sample : g.samples) statics += sample.experiment < 0;
+  EXPECT_EQ(statics, 24);
+  EXPECT_EQ(g.samples.back().experiment, -2);
+}
+
 TEST(JointProbing, ShakenAndProbedTogetherRecoverTheTruthFromTwiceOff) {
   const path dir = test::scratch("joint-fit");
   const std::string tracks = make_data(dir);
@@ -158,6 +203,42 @@ TEST(JointProbing, AStaticMeasurementOfAnotherMaterialIsRefusedWithItsName) {
               std::string::npos)
         << e.what();
   }
+}
+
+}  // namespace
+}  // namespace kelvin
+
+namespace kelvin {
+namespace {
+
+TEST(ProbingFitCli, StaticMeasurementsAloneFitThroughKelvinFitWithStandardErrors) {
+  // The probing example through kelvin fit's loop: the same optimum as probe-fit
+  // (λ 22.2 kPa, μ 11.2 kPa), standard errors from the static rows of the
+  // Gauss–Newton system, the noise read back, and a fitted scenario kelvin probe runs.
+  const path out = test::scratch("probing-fit-cli");
+  test::CliRun r = test::run_kelvin(
+      "fit " KELVIN_SOURCE_DIR "/yaml/examples/probe-foam-block.yaml -q -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const std::string fitted = test::read_text(out / "fitted.yaml");
+  double lambda = 0, mu = 0;
+  const auto at = fitted.find("lambda:");
+  ASSERT_NE(at, std::string::npos) << fitted;
+  ASSERT_EQ(std::sscanf(fitted.c_str() + at, "lambda: %lf, mu: %lf", &lambda, &mu), 2) << fitted;
+  EXPECT_NEAR(lambda, 22186, 30);
+  EXPECT_NEAR(mu, 11238, 10);
+  const std::string report = test::read_text(out / "report.md");
+  EXPECT_NE(report.find("| elastic.lambda | 4e+04 | 2.219e+04 | ± "), std::string::npos) << report;
+  EXPECT_NE(report.find("| elastic.mu | 5000 | 1.124e+04 | ± "), std::string::npos) << report;
+  double sigma = 0;
+  const auto noise = report.find("Estimated marker noise σ = ");
+  ASSERT_NE(noise, std::string::npos) << report;
+  ASSERT_EQ(std::sscanf(report.c_str() + noise + std::strlen("Estimated marker noise σ = "), "%lf",
+                        &sigma),
+            1);
+  EXPECT_NEAR(sigma, 0.05, 0.005);  // mm: the example's noise
+  r = test::run_kelvin("probe " + (out / "fitted.yaml").string() + " -o " + (out / "sim").string());
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_TRUE(test::fs::exists(out / "sim" / "corner.csv"));
 }
 
 }  // namespace

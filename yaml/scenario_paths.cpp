@@ -35,6 +35,9 @@ void absolute_scenario_paths(const YAML::Node& root, const yamlutil::Doc& d) {
   if (const YAML::Node experiments = yaml_child(yaml_child(root, "fit"), "experiments");
       experiments.IsDefined() && experiments.IsSequence())
     for (const auto& e : experiments) make_absolute(e, d);
+  if (const YAML::Node measurements = yaml_child(yaml_child(root, "probing"), "measurements");
+      measurements.IsDefined() && measurements.IsSequence())
+    for (const auto& m : measurements) make_absolute(yaml_child(m, "observed"), d);
 }
 
 YAML::Node yaml_child(const YAML::Node& node, const std::string& key) {
