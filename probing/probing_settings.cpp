@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 
 #include "engine/error.hpp"
@@ -16,6 +17,8 @@ using yamlutil::index;
 using yamlutil::join;
 
 bool has_probing(const Scenario& s) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(s.path, ec)) return false;  // built in memory
   const yamlutil::Doc d(s.path);
   return d.root().IsMap() && d.root()["probing"];
 }
