@@ -111,10 +111,6 @@ Eigen::VectorXd load_parameters(const std::string& path, const ParameterMap& map
   return p;
 }
 
-/// The most parameters a diagnosis fit starts in Gauss–Newton-scaled ones with (one
-/// sensitivity solve per parameter; the missing force's hundreds go without).
-constexpr int kGaussNewtonStartParameters = 30;
-
 struct FitRun {
   Eigen::VectorXd p;
   int evaluations = 0;

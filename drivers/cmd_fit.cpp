@@ -57,6 +57,11 @@ int run(const FitArgs& args) {
                  scenario.path);
     problem = std::make_unique<FitProblem>(scenario, scenario.fit.parameters);
     options = fit_options(scenario, args);
+    // A clock offset or marker offsets fitted with log moduli differ in scale by orders
+    // of magnitude: unscaled, V09's lag stayed at 2e-7 s while the moduli moved.
+    options.gauss_newton_start = !problem->map().observation_blocks().empty() &&
+                                 problem->map().size() <= kGaussNewtonStartParameters &&
+                                 options.algorithm == "lbfgs";
   } catch (const Error& e) {
     fmt::print(stderr, "error: {}\n", e.what());
     return kExitInputError;

@@ -574,7 +574,9 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       // when JᵀJ is to be had, as before otherwise.
       c.gauss_newton_start_pending = false;
       if (!c.outcome.interrupted && !c.budget_spent && !c.plateau) {
-        if (c.tolerance_scale <= 1 && scale_by_gauss_newton("the start point is evaluated")) {
+        // At any stage: JᵀJ comes at the scenario's tolerances, and a scaling of the
+        // start needs only its shape.
+        if (scale_by_gauss_newton("the start point is evaluated")) {
           c.origin = c.outcome.p;
           x.assign(n, 0.0);
         } else {

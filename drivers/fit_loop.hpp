@@ -37,6 +37,11 @@ struct FitRecord {
   Eigen::VectorXd p;  // optimiser-space parameters of this trial
 };
 
+/// The most parameters a Gauss–Newton-scaled start is taken for (FitOptions::
+/// gauss_newton_start): its sensitivity solve carries one vector per parameter, and
+/// the missing force's hundreds go without.
+constexpr int kGaussNewtonStartParameters = 30;
+
 struct FitOptions {
   std::string algorithm = "lbfgs";  // lbfgs | mma | slsqp | bobyqa
   GradientOptions gradient;         // method, checkpoints, segments, interrupt
