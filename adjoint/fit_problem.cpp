@@ -35,7 +35,7 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
   const bool probed = has_probing(scenario);
   if (!probed || !scenario.markers.observed.names.empty())
     experiments_.push_back(std::make_unique<Experiment>(scenario, scenario.fit.objective));
-  if (probed) add_static_terms(scenario, scenario);
+  if (probed) add_static_terms(scenario);
   const auto dir = std::filesystem::path(scenario.path).parent_path();
   for (const auto& file : scenario.fit.experiments) {
     owned_.push_back(std::make_unique<Scenario>(load_scenario((dir / file).string())));
@@ -52,8 +52,14 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
     const bool probing = has_probing(other);
     if (!probing || !other.markers.observed.names.empty())
       experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
-    if (probing) add_static_terms(scenario, other);
+    if (probing) add_static_terms(other);
   }
+  if (experiments_.empty() && statics_.empty())
+    throw Error(fmt::format(
+        "{}: nothing to fit: no observed tracks (markers.observed) and no static measurement "
+        "with observed positions (probing.measurements[].observed)",
+        scenario.path));
+  weigh_static_terms(scenario);
   map_ = std::make_unique<ParameterMap>(
       specs, scenario, model(),
       experiments_.empty() ? std::vector<std::string>{} : experiments_[0]->objective().names());
@@ -125,23 +131,25 @@ FemModel& FitProblem::model() {
   return experiments_.empty() ? statics_[0]->model() : experiments_[0]->model();
 }
 
-void FitProblem::add_static_terms(const Scenario& main, const Scenario& probing) {
+void FitProblem::add_static_terms(const Scenario& probing) {
   const ProbingSpec spec = load_probing(probing);
-  // Each measurement weighs like a captured track as long as the fitted one (alone,
-  // any weight is the same fit).
-  const double weight = spec.weight > 0           ? spec.weight
-                        : experiments_.empty() || !(main.time.end > 0) ? 1.0
-                                                                      : main.time.end;
-  for (const auto& m : spec.measurements)
-    if (m.observed_path.empty())
-      throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",
-                              probing.path, m.name));
   probes_.push_back(std::make_unique<ProbeExperiment>(probing, spec));
   ProbeExperiment& ex = *probes_.back();
+  // A measurement without observed positions (one kept for kelvin probe's
+  // predictions), or with every marker occluded, tells the fit nothing.
   for (int m = 0; m < ex.size(); ++m)
-    statics_.push_back(std::make_unique<StaticTerm>(ex.model(m), spec.measurements[m].name,
-                                                    ex.scenario().markers.embedded,
-                                                    spec.measurements[m].observed, weight));
+    if (spec.measurements[m].observed.array().isFinite().any())
+      statics_.push_back(std::make_unique<StaticTerm>(ex.model(m), spec.measurements[m].name,
+                                                      ex.scenario().markers.embedded,
+                                                      spec.measurements[m].observed, spec.weight));
+}
+
+void FitProblem::weigh_static_terms(const Scenario& main) {
+  // Each measurement weighs like a captured track as long as the fitted one (alone,
+  // any weight is the same fit), unless its probing section says otherwise.
+  const double fallback = experiments_.empty() || !(main.time.end > 0) ? 1.0 : main.time.end;
+  for (auto& st : statics_)
+    if (!(st->weight() > 0)) st->set_weight(fallback);
 }
 
 Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions& options) {

@@ -67,8 +67,12 @@ class FitProblem {
   std::vector<std::unique_ptr<ProbeExperiment>> probes_;  // the static terms' models
   std::vector<std::unique_ptr<StaticTerm>> statics_;
   std::unique_ptr<ParameterMap> map_;
-  /// Adds the static measurements of `probing` (a loaded scenario of fit.experiments).
-  void add_static_terms(const Scenario& main, const Scenario& probing);
+  /// Adds the observed static measurements of `probing` (the fitted scenario or one
+  /// of its fit.experiments).
+  void add_static_terms(const Scenario& probing);
+  /// Gives the static terms without a probing.weight the default one, once every
+  /// experiment is loaded.
+  void weigh_static_terms(const Scenario& main);
 };
 
 }  // namespace kelvin

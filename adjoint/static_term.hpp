@@ -31,12 +31,14 @@ struct StaticTermResult {
 class StaticTerm {
  public:
   /// `model` (its loads: the scenario's plus the probe's) must outlive the term and
-  /// share the fitted material models; `observed` is 3 × markers, NaN = occluded.
+  /// share the fitted material models; `observed` is 3 × markers, NaN = occluded;
+  /// the weight (s) may be set later.
   StaticTerm(FemModel& model, std::string name, std::vector<MarkerEmbedding> markers,
              Eigen::Matrix3Xd observed, double weight);
 
   const std::string& name() const { return name_; }
   double weight() const { return weight_; }
+  void set_weight(double w) { weight_ = w; }
   int observed_markers() const { return observed_count_; }
   FemModel& model() { return model_; }
 

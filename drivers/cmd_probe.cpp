@@ -233,6 +233,9 @@ void run_probe_fit(const Args& a) {
     const auto sets = fit_parameter_sets(probes, measurement_names, o);
     const std::filesystem::path dir = std::filesystem::path(a.outdir) / "sets";
     std::filesystem::create_directories(dir);
+    // probe --blend reads every set here: ones of an earlier run would join the blend.
+    for (const auto& entry : std::filesystem::directory_iterator(dir))
+      if (entry.path().extension() == ".csv") std::filesystem::remove(entry.path());
     fmt::print("one parameter set per measurement (kelvin probe --blend {}):\n", a.outdir);
     for (const auto& set : sets) {
       write_file_atomic((dir / (set.name + ".csv")).string(), parameter_set_csv(names, set));

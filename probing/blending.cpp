@@ -13,10 +13,14 @@
 namespace kelvin {
 namespace {
 
-/// The median of the distances from each set to its nearest other set; 0 without any.
+/// The median of the distances from each set to its nearest other set, over the
+/// ones that differ (two sets at one strain level must not switch the blend off);
+/// 0 without any.
 double median_nearest(const std::vector<double>& nearest) {
-  if (nearest.empty()) return 0;
-  std::vector<double> v = nearest;
+  std::vector<double> v;
+  for (double d : nearest)
+    if (d > 0 && std::isfinite(d)) v.push_back(d);
+  if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
 }

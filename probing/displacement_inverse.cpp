@@ -4,6 +4,7 @@
 
 #include <Eigen/SparseCholesky>
 #include <cmath>
+#include <exception>
 #include <nlopt.hpp>
 
 #include "engine/error.hpp"
@@ -27,7 +28,8 @@ struct Problem {
   int evaluations = 0;
   double best = INFINITY, best_data = INFINITY;
   Eigen::VectorXd best_z;
-  std::string failure;  // of the last failed trial
+  std::string failure;       // of the last failed trial
+  std::exception_ptr error;  // thrown by an evaluation: ends the fit, rethrown
   int failed = 0;
   double scale = 0;  // Φ's factor: L-BFGS's first step is kFirstStep long
 
@@ -105,7 +107,14 @@ double objective(unsigned n, const double* zp, double* grad, void* data) {
   double phi = 0, fit = 0;
   Eigen::VectorXd g;
   ++p.evaluations;
-  if (!p.evaluate(z, phi, fit, grad ? &g : nullptr)) {
+  bool ok = false;
+  try {
+    ok = p.evaluate(z, phi, fit, grad ? &g : nullptr);
+  } catch (...) {  // NLopt would report it as a generic failure: keep it to rethrow
+    p.error = std::current_exception();
+    throw nlopt::forced_stop();
+  }
+  if (!ok) {
     ++p.failed;
     if (grad) std::fill(grad, grad + n, 0.0);
     return kFailedTrial;
@@ -205,11 +214,15 @@ DisplacementInverseResult displacement_based_inverse(std::vector<ObservedProbe>&
     result.stop = r == nlopt::MAXEVAL_REACHED ? "evaluation budget spent" : "converged";
   } catch (const nlopt::roundoff_limited&) {
     result.stop = "converged to round-off";
+  } catch (const nlopt::forced_stop&) {
+    if (!p.error) throw;
   } catch (const std::runtime_error& e) {
+    if (p.error) std::rethrow_exception(p.error);
     // L-BFGS gives up this way when its line search finds no descent, which at a
     // noise-free optimum is round-off too; the best point so far is kept.
     result.stop = fmt::format("optimiser failure ({}) at the best point", e.what());
   }
+  if (p.error) std::rethrow_exception(p.error);
   if (p.failed > 0)
     result.stop += fmt::format(" ({} trial(s) without a static equilibrium, the last: {})",
                                p.failed, p.failure);

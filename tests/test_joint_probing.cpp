@@ -182,6 +182,30 @@ TEST(JointProbing, ShakenAndProbedTogetherRecoverTheTruthFromTwiceOff) {
   for (const auto& r : ev.statics) EXPECT_LT(r.rms, 1e-6);  // kelvin probe writes 9 digits
 }
 
+TEST(JointProbing, MeasurementsWithoutObservedPositionsStayOutOfTheFit) {
+  // A probing section kept for kelvin probe's predictions changes nothing in a fit
+  // of captured tracks; alone, with nothing observed, there is nothing to fit.
+  const path dir = test::scratch("joint-unobserved");
+  const std::string tracks = make_data(dir);
+  const std::string probing = probed(kStart, "");
+  const std::string section = probing.substr(probing.find("probing:"));
+  test::write_text(dir / "fit.yaml", shaken(kStart, "  observed: " + tracks + "\n" + section +
+                                                        "fit:\n  parameters: [elastic.mu]\n"));
+  const Scenario s = load_scenario((dir / "fit.yaml").string());
+  FitProblem problem(s, s.fit.parameters);
+  EXPECT_EQ(problem.num_experiments(), 1);
+  EXPECT_EQ(problem.num_static_terms(), 0);
+
+  test::write_text(dir / "alone.yaml", probing + "fit:\n  parameters: [elastic.mu]\n");
+  const Scenario alone = load_scenario((dir / "alone.yaml").string());
+  try {
+    FitProblem nothing(alone, alone.fit.parameters);
+    FAIL() << "accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("nothing to fit"), std::string::npos) << e.what();
+  }
+}
+
 TEST(JointProbing, AStaticMeasurementOfAnotherMaterialIsRefusedWithItsName) {
   const path dir = test::scratch("joint-refused");
   const std::string tracks = make_data(dir);
