@@ -28,12 +28,20 @@ void parallel_for(int count, Body body) {
 /// residual needs them at every evaluation).
 class PosesAt {
  public:
-  PosesAt(const std::vector<ClampBinding>& clamps, double t) {
-    for (size_t c = 0; c < clamps.size(); ++c)
+  /// Ramped clamps (a probe pressed to a depth) at `ramp` of their translation.
+  PosesAt(const std::vector<ClampBinding>& clamps, double t, double ramp = 1.0) {
+    for (size_t c = 0; c < clamps.size(); ++c) {
+      RigidPose pose = clamps[c].motion->at(t);
+      if (clamps[c].ramped) {
+        pose.d *= ramp;
+        pose.ddot *= ramp;
+        pose.dddot *= ramp;
+      }
       if (c < kInline)
-        inline_[c] = clamps[c].motion->at(t);
+        inline_[c] = pose;
       else
-        more_.push_back(clamps[c].motion->at(t));
+        more_.push_back(pose);
+    }
   }
   const RigidPose& operator[](int c) const {
     return c < static_cast<int>(kInline) ? inline_[c] : more_[c - kInline];
@@ -418,11 +426,11 @@ Eigen::Matrix<double, 3, 4> FemModel::element_mass_times(
 }
 
 void FemModel::expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
-                      Eigen::Matrix3Xd& v) const {
+                      Eigen::Matrix3Xd& v, double ramp) const {
   const int nn = mesh_.num_nodes();
   x.resize(3, nn);
   v.resize(3, nn);
-  const PosesAt poses(clamps_, t);
+  const PosesAt poses(clamps_, t, ramp);
   parallel_for(nn, [&](int a) {
     const int c = clamp_of_node_[a];
     if (c >= 0) {

@@ -40,6 +40,9 @@ struct ClampBinding {
   /// by pads of compliance c (m³/N) and retardation time τ (s); 0: rigid.
   double compliance = 0;
   double damping_time = 0;
+  /// A probe pressed to a depth: its displacement from rest is part of the load, so
+  /// static load steps (expand's `ramp`) scale it. Its motion must be a translation.
+  bool ramped = false;
   bool compliant() const { return compliance > 0; }
 };
 
@@ -156,9 +159,9 @@ class FemModel {
   }
 
   /// Full nodal positions and velocities at time t from the free-dof vectors
-  /// (clamped nodes follow their motion).
+  /// (clamped nodes follow their motion; ramped clamps `ramp` of their translation).
   void expand(double t, const double* x_free, const double* v_free, Eigen::Matrix3Xd& x,
-              Eigen::Matrix3Xd& v) const;
+              Eigen::Matrix3Xd& v, double ramp = 1.0) const;
   /// Full nodal accelerations at time t: a_free on free dofs, the clamp motion's
   /// acceleration on clamped nodes.
   void expand_acceleration(double t, const double* a_free, Eigen::Matrix3Xd& a) const;
@@ -223,11 +226,12 @@ class FemModel {
   /// Potential of the external forces, −Σ (m_a g + f_a)·x_a, for full positions.
   double external_potential(const Eigen::Matrix3Xd& x) const;
 
- private:
   /// P, the requested tangents (kTangent, kRateTangent) and energy of element e,
   /// summed over the material terms; false when a term rejects the state.
   bool evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                         unsigned request, ElementResponse& out) const;
+
+ private:
   void build_pattern();
   void build_gather_plan();
   void build_mass();

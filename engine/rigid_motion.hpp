@@ -34,6 +34,16 @@ class FixedMotion : public RigidMotion {
   RigidPose at(double) const override { return {}; }
 };
 
+/// A clamp held at a constant offset from rest (a probe pressed to a depth).
+class TranslatedMotion : public RigidMotion {
+ public:
+  explicit TranslatedMotion(const Eigen::Vector3d& d) { pose_.d = d; }
+  RigidPose at(double) const override { return pose_; }
+
+ private:
+  RigidPose pose_;
+};
+
 /// One term a sin(2π f t + φ) of a scripted motion.
 struct Sinusoid {
   double amplitude = 0;  // m for translation (times `direction`), rad for rotation

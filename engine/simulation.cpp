@@ -66,7 +66,7 @@ std::unique_ptr<FemModel> build_model(const Scenario& s) {
   }
   std::vector<ClampBinding> clamps;
   for (const auto& c : s.clamps)
-    clamps.push_back({c.name, c.nodes, c.motion, c.compliance, c.damping_time});
+    clamps.push_back({c.name, c.nodes, c.motion, c.compliance, c.damping_time, c.ramped});
   std::vector<NodeLoad> loads;
   for (const auto& l : s.loads) loads.push_back({l.name, l.nodes, l.force, l.mass});
   return std::make_unique<FemModel>(s.mesh, std::move(terms), std::move(density), s.gravity,

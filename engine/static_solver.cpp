@@ -4,6 +4,7 @@
 
 #include <Eigen/CholmodSupport>
 #include <Eigen/KLUSupport>
+#include <algorithm>
 #include <cmath>
 
 namespace kelvin {
@@ -21,7 +22,7 @@ struct Residual {
   /// false when an element is inadmissible at x.
   bool eval(const Eigen::VectorXd& xf, double s, bool tangent, Eigen::VectorXd& g,
             double* energy = nullptr) {
-    model.expand(t, xf.data(), nullptr, x, v);
+    model.expand(t, xf.data(), nullptr, x, v, s * load_fraction);
     AssemblyRequest req;
     req.stiffness = tangent;
     req.energy = energy != nullptr;
@@ -41,7 +42,13 @@ struct Residual {
 
 Eigen::VectorXd rigid_initial_guess(const FemModel& model, double t) {
   Eigen::VectorXd x(model.num_dofs());
-  const RigidPose pose = model.clamps().empty() ? RigidPose{} : model.clamps()[0].motion->at(t);
+  // A pressed probe (a ramped clamp) is a load, not the support.
+  RigidPose pose;
+  for (const auto& c : model.clamps())
+    if (!c.ramped) {
+      pose = c.motion->at(t);
+      break;
+    }
   Eigen::Matrix3Xd moved(3, model.mesh().num_nodes());
   for (int a = 0; a < moved.cols(); ++a) moved.col(a) = pose.position(model.mesh().nodes.col(a));
   model.restrict(moved, x.data());
@@ -53,14 +60,22 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
   StaticResult res;
   Residual R{model, t, opt.load_fraction, {}, {}, {}, {}};
   Eigen::VectorXd g, g_trial, x_trial;
-  if (!R.eval(x_free, 1.0, false, g)) {
+  // A pressed probe (ramped clamp) may invert the start at its full depth: the start
+  // must then be admissible with the probe at rest, and the load steps bring it in.
+  const bool pressed = std::any_of(model.clamps().begin(), model.clamps().end(),
+                                   [](const ClampBinding& c) { return c.ramped; });
+  double imbalance = 0;
+  if (R.eval(x_free, 1.0, false, g))
+    imbalance = g.norm();
+  else if (!pressed || !R.eval(x_free, 0.0, false, g)) {
     res.message =
         fmt::format("element {} is inverted in the starting configuration", R.out.failed_element);
     return res;
-  }
+  } else
+    imbalance = g.norm();
   // Forces are compared to the load, or to the initial imbalance when there is no load.
   const double scale =
-      std::max({opt.load_fraction * model.external_force().norm(), g.norm(), 1e-300});
+      std::max({opt.load_fraction * model.external_force().norm(), imbalance, 1e-300});
   // Newton corrections below this length (1e-12 of the body's size) are round-off.
   const Eigen::Matrix3Xd& X = model.mesh().nodes;
   const double negligible = 1e-12 * (X.rowwise().maxCoeff() - X.rowwise().minCoeff()).norm();

@@ -28,12 +28,15 @@ struct StaticResult {
   std::string message;  // why it failed, when it did
 };
 
-/// x_free: initial guess in, equilibrium out.
+/// x_free: initial guess in, equilibrium out. Ramped clamps (pressed probes) are
+/// part of the load: the equilibrium holds them at load_fraction of their
+/// translation (expand with ramp = load_fraction).
 StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_free,
                           const StaticOptions& options = {});
 
 /// A starting guess for the free dofs at time t: rest positions moved rigidly with
-/// the first clamp (so a clamp that starts displaced does not tear the mesh).
+/// the first clamp that is not ramped (so a clamp that starts displaced does not
+/// tear the mesh).
 Eigen::VectorXd rigid_initial_guess(const FemModel& model, double t);
 
 }  // namespace kelvin
