@@ -138,10 +138,11 @@ void FitProblem::add_static_terms(const Scenario& probing) {
   // A measurement without observed positions (one kept for kelvin probe's
   // predictions), or with every marker occluded, tells the fit nothing.
   for (int m = 0; m < ex.size(); ++m)
-    if (spec.measurements[m].observed.array().isFinite().any())
-      statics_.push_back(std::make_unique<StaticTerm>(ex.model(m), spec.measurements[m].name,
-                                                      ex.scenario().markers.embedded,
-                                                      spec.measurements[m].observed, spec.weight));
+    if (spec.measurements[m].observed.array().isFinite().any() || !ex.measured_reactions(m).empty())
+      statics_.push_back(std::make_unique<StaticTerm>(
+          ex.model(m), spec.measurements[m].name, ex.scenario().markers.embedded,
+          spec.measurements[m].observed, spec.weight, ex.measured_reactions(m),
+          spec.reaction_weight()));
 }
 
 void FitProblem::weigh_static_terms(const Scenario& main) {

@@ -8,6 +8,9 @@
 /// RMS stays a distance. Its gradient comes from the adjoint of the equilibrium
 /// R(x; q) = r(x) − f_ext = 0: K λ = w Σ_j W_jᵀ r_j, dΦ_s/dq = −λᵀ ∂R/∂q, one solve
 /// with the tangent already assembled, chained through the fit's parameter map.
+/// A pressed probe whose force R̄ was measured adds w ½ c ‖R − R̄‖² (c = (marker
+/// noise / force noise)², engine/clamp_reaction.hpp): its position derivative joins
+/// the adjoint's load, its parameter derivative is the held rows of ∂R/∂q.
 #include <Eigen/Core>
 #include <functional>
 #include <string>
@@ -34,7 +37,9 @@ class StaticTerm {
   /// share the fitted material models; `observed` is 3 × markers, NaN = occluded;
   /// the weight (s) may be set later.
   StaticTerm(FemModel& model, std::string name, std::vector<MarkerEmbedding> markers,
-             Eigen::Matrix3Xd observed, double weight);
+             Eigen::Matrix3Xd observed, double weight,
+             std::vector<std::pair<int, Eigen::Vector3d>> reactions = {},
+             double reaction_weight = 0);
 
   const std::string& name() const { return name_; }
   double weight() const { return weight_; }
@@ -47,7 +52,8 @@ class StaticTerm {
   StaticTermResult evaluate(const ParameterMap& map, const Eigen::VectorXd& p, bool gradient);
 
   /// For Gauss–Newton: the residuals x_j − x̄_j of the observed coordinates (NaN ones
-  /// left out; `coordinates` gets (marker, axis) of each) and, when asked, their
+  /// left out; `coordinates` gets (marker, axis) of each), then √c (R − R̄) of each
+  /// measured reaction k (coordinates (−1 − k, axis)) and, when asked, their
   /// Jacobian dr/dp = −W K⁻¹ ∂R/∂p (one solve per parameter with one factorisation).
   /// False with `error` set when there is no equilibrium.
   bool residuals(const ParameterMap& map, const Eigen::VectorXd& p, bool with_jacobian,
@@ -60,6 +66,8 @@ class StaticTerm {
   std::vector<MarkerEmbedding> markers_;
   Eigen::Matrix3Xd observed_;
   double weight_;
+  std::vector<std::pair<int, Eigen::Vector3d>> reactions_;  // (clamp, R̄)
+  double reaction_weight_;
   int observed_count_ = 0;
   Eigen::VectorXd x_free_;  // the last equilibrium: the next trial's start
 
@@ -70,6 +78,10 @@ class StaticTerm {
   /// The tangent K over the free dofs at full positions x, factorised; false when
   /// singular or an element is inadmissible.
   bool factor_stiffness(const Eigen::Matrix3Xd& x, std::string& error);
+  /// R − R̄ of each measured reaction at x; false with `error` set when a material
+  /// rejects x.
+  bool reaction_misfits(const Eigen::Matrix3Xd& x, std::vector<Eigen::Vector3d>& misfit,
+                        std::string& error) const;
   std::function<Eigen::VectorXd(const Eigen::VectorXd&)> solve_;
 };
 

@@ -93,6 +93,8 @@ void run_probe(const Args& a) {
                names, a.metric);
   }
   if (const std::string why = prepare_output_dir(a.outdir); !why.empty()) throw Error(why);
+  std::string reactions = "measurement,press,fx,fy,fz\n";
+  bool pressed = false;
   for (int m = 0; m < ex.size(); ++m) {
     Eigen::Matrix3Xd x;
     if (blender) {
@@ -121,6 +123,20 @@ void run_probe(const Args& a) {
         "wrote {}\n",
         name, 1e3 * (at - rest).colwise().norm().maxCoeff(),
         1e3 * (x - s.mesh.nodes).colwise().norm().maxCoeff(), path);
+    const auto& presses = ex.spec().measurements[m].presses;
+    const std::vector<Eigen::Vector3d> R = ex.reactions(m, x);
+    for (size_t k = 0; k < R.size(); ++k) {
+      pressed = true;
+      reactions += fmt::format("{},{},{:.9g},{:.9g},{:.9g}\n", name, presses[k].clamp.name,
+                               R[k].x(), R[k].y(), R[k].z());
+      fmt::print("  press '{}': force on the body [{:.6g}, {:.6g}, {:.6g}] N\n",
+                 presses[k].clamp.name, R[k].x(), R[k].y(), R[k].z());
+    }
+  }
+  if (pressed) {
+    const std::string path = (std::filesystem::path(a.outdir) / "reactions.csv").string();
+    write_file_atomic(path, reactions);
+    fmt::print("wrote {}\n", path);
   }
 }
 
@@ -186,6 +202,15 @@ void run_probe_fit(const Args& a) {
       throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",
                               s.path, m.name));
   ProbeExperiment ex(s, spec);
+  bool forced = false;  // does any measurement say how hard the probe pushed?
+  for (int m = 0; m < ex.size(); ++m) {
+    forced |= !ex.measured_reactions(m).empty();
+    for (const auto& l : spec.measurements[m].loads) forced |= l.force.norm() > 0 || l.mass > 0;
+  }
+  if (!forced)
+    fmt::print(
+        "note: no measurement has a probe force (loads) or a measured reaction (press.reaction): "
+        "only the body's own weight sets the moduli's scale\n");
   if (const std::string why = prepare_output_dir(a.outdir); !why.empty()) throw Error(why);
   std::vector<std::string> names;
   Eigen::MatrixXd q;
@@ -214,6 +239,8 @@ void run_probe_fit(const Args& a) {
     names = r.parameters, q = r.q;
     fmt::print("  marker rms {:.4f} mm per coordinate after {} evaluations ({})\n", 1e3 * r.rms,
                r.evaluations, r.stop);
+    if (spec.reaction_weight() > 0)
+      fmt::print("  measured reactions: rms {:.4g} N per component\n", r.reaction_rms);
   }
   const auto [group, groups] = element_groups(s.mesh, spec.grouping);
   print_values(names, q, group, groups);

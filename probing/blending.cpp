@@ -169,7 +169,7 @@ BlendedEquilibrium blended_equilibrium(FemModel& model, const Blender& blender) 
     if (!r.converged)
       out.message =
           fmt::format("no equilibrium at {:.0f} % of the load: {}", 100 * fraction, r.message);
-    model.expand(0, x_free.data(), zero.data(), x, v);
+    model.expand(0, x_free.data(), zero.data(), x, v, fraction);
     return r.converged;
   };
   // Increments: the weights of each from the strain the one before left.

@@ -26,7 +26,8 @@ struct Problem {
   double data_size = 1;           // S
   std::vector<Eigen::VectorXd> x_free;
   int evaluations = 0;
-  double best = INFINITY, best_data = INFINITY;
+  double best = INFINITY, best_data = INFINITY, best_reaction = 0;
+  double reaction = 0;  // ½ c Σ ‖R − R̄‖² of the last evaluation
   Eigen::VectorXd best_z;
   std::string failure;       // of the last failed trial
   std::exception_ptr error;  // thrown by an evaluation: ends the fit, rethrown
@@ -39,6 +40,7 @@ struct Problem {
     const int columns = groups * nq;
     Eigen::VectorXd dphi = Eigen::VectorXd::Zero(columns);
     data = 0;
+    reaction = 0;
     for (size_t m = 0; m < ms.size(); ++m) {
       FemModel& model = *ms[m].model;
       Eigen::MatrixXd& q = model.terms()[term].q;
@@ -65,6 +67,24 @@ struct Problem {
         const MarkerEmbedding& mk = ms[m].markers[j];
         for (int a = 0; a < 4; ++a) pull.col(mesh.tets(a, mk.tet)) += mk.weights[a] * r;
       }
+      // Measured reactions: their misfit, and (∂R/∂x)ᵀ c ΔR into the adjoint's load.
+      std::vector<std::pair<ClampReaction, Eigen::Vector3d>> presses;
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(model.num_dofs());
+      for (const auto& [clamp, seen] : ms[m].reactions) {
+        ClampReaction press(model, clamp);
+        Eigen::Vector3d R;
+        if (!press.force(x, R)) {
+          failure = fmt::format("measurement {}: element {} inadmissible", m, press.failed_element);
+          return false;
+        }
+        const Eigen::Vector3d dR = ms[m].reaction_weight * (R - seen);
+        reaction += 0.5 * dR.dot(R - seen);
+        if (grad && !press.add_position_adjoint(x, dR, rhs)) {
+          failure = fmt::format("measurement {}: element {} inadmissible", m, press.failed_element);
+          return false;
+        }
+        presses.emplace_back(std::move(press), dR);
+      }
       if (!grad) continue;
       AssemblyRequest req;
       req.force = false, req.stiffness = true;
@@ -76,8 +96,9 @@ struct Problem {
       }
       Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> K(
           to_sparse_matrix(model.pattern(), out.K));
-      Eigen::VectorXd rhs(model.num_dofs());
-      model.restrict(pull, rhs.data());
+      Eigen::VectorXd marker_load(model.num_dofs());
+      model.restrict(pull, marker_load.data());
+      rhs += marker_load;
       const Eigen::VectorXd lambda = K.solve(rhs);
       if (K.info() != Eigen::Success || !lambda.allFinite()) {
         failure = fmt::format("measurement {}: the stiffness at equilibrium is singular", m);
@@ -85,9 +106,11 @@ struct Problem {
       }
       dphi -=
           force_parameter_jacobian(model, term, x, group, columns, 0, false).transpose() * lambda;
+      for (const auto& [press, dR] : presses)
+        dphi += reaction_parameter_jacobian(model, term, press, x, group, columns).transpose() * dR;
     }
     const Eigen::VectorXd Lz = L.rows() ? Eigen::VectorXd(L * z) : Eigen::VectorXd();
-    phi = (data + 0.5 * reg * Lz.squaredNorm()) / data_size;
+    phi = (data + reaction + 0.5 * reg * Lz.squaredNorm()) / data_size;
     if (grad) {
       *grad = z.array().exp().matrix().cwiseProduct(dphi);
       if (L.rows()) *grad += reg * (L.transpose() * Lz);
@@ -121,7 +144,7 @@ double objective(unsigned n, const double* zp, double* grad, void* data) {
   }
   if (p.scale == 0) p.scale = g.norm() > 0 ? kFirstStep / g.norm() : 1 / phi;
   if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = p.scale * g;
-  if (phi < p.best) p.best = phi, p.best_data = fit, p.best_z = z;
+  if (phi < p.best) p.best = phi, p.best_data = fit, p.best_reaction = p.reaction, p.best_z = z;
   return p.scale * phi;
 }
 
@@ -195,7 +218,7 @@ DisplacementInverseResult displacement_based_inverse(std::vector<ObservedProbe>&
     double phi = 0, data = 0;
     if (!p.evaluate(z, phi, data, nullptr))
       throw Error("displacement-based inverse: at the start values, " + p.failure);
-    p.best = phi, p.best_data = data, p.best_z = z;
+    p.best = phi, p.best_data = data, p.best_reaction = p.reaction, p.best_z = z;
   }
 
   nlopt::opt opt(nlopt::LD_LBFGS, static_cast<unsigned>(z.size()));
@@ -231,6 +254,13 @@ DisplacementInverseResult displacement_based_inverse(std::vector<ObservedProbe>&
   for (int e = 0; e < mesh.num_tets(); ++e)
     result.q.col(e) = p.best_z.segment(p.group[e] * p.nq, p.nq).array().exp();
   result.rms = std::sqrt(2 * p.best_data / (3.0 * observed));
+  int reactions = 0;
+  double weight = 0;
+  for (const auto& m : ms)
+    if (!m.reactions.empty())
+      reactions += static_cast<int>(m.reactions.size()), weight = m.reaction_weight;
+  if (reactions > 0 && weight > 0)
+    result.reaction_rms = std::sqrt(2 * p.best_reaction / weight / (3.0 * reactions));
   result.evaluations = p.evaluations;
   // Leave the models at the fitted values.
   for (auto& m : ms) m.model->terms()[p.term].q = result.q;

@@ -112,16 +112,38 @@ ForceInverseResult force_based_inverse(const std::vector<StaticState>& ms,
 
   System s;
   std::vector<Eigen::SparseMatrix<double>> blocks;
+  std::vector<Eigen::VectorXd> loads;
   int n_rows = 0;
   for (size_t m = 0; m < ms.size(); ++m) {
     const int set = o.per_measurement ? static_cast<int>(m) : 0;
+    const FemModel& model = *ms[m].model;
     try {
-      blocks.push_back(force_parameter_jacobian(*ms[m].model, term, ms[m].x, group, columns,
-                                                set * groups * nq, true));
+      Eigen::SparseMatrix<double> rows =
+          force_parameter_jacobian(model, term, ms[m].x, group, columns, set * groups * nq, true);
+      Eigen::VectorXd f = model.external_force();
+      for (const auto& [clamp, seen] : ms[m].reactions) {
+        const ClampReaction press(model, clamp);
+        const Eigen::Matrix3Xd held = reaction_parameter_jacobian(
+            model, term, press, ms[m].x, group, columns, set * groups * nq);
+        Eigen::SparseMatrix<double> grown(rows.rows() + 3, columns);
+        Triplets t;
+        for (int k = 0; k < rows.outerSize(); ++k)
+          for (Eigen::SparseMatrix<double>::InnerIterator it(rows, k); it; ++it)
+            t.emplace_back(it.row(), it.col(), it.value());
+        for (int c = 0; c < columns; ++c)
+          for (int i = 0; i < 3; ++i)
+            if (held(i, c) != 0) t.emplace_back(rows.rows() + i, c, held(i, c));
+        grown.setFromTriplets(t.begin(), t.end());
+        rows = std::move(grown);
+        f.conservativeResize(f.size() + 3);
+        f.tail<3>() = seen + press.weight();
+      }
+      n_rows += static_cast<int>(rows.rows());
+      blocks.push_back(std::move(rows));
+      loads.push_back(std::move(f));
     } catch (const Error& e) {
       throw Error(fmt::format("force-based inverse: measurement {}: {}", m, e.what()));
     }
-    n_rows += ms[m].model->num_dofs();
   }
   s.A.resize(n_rows, columns);
   {
@@ -136,8 +158,8 @@ ForceInverseResult force_based_inverse(const std::vector<StaticState>& ms,
     s.A.setFromTriplets(rows.begin(), rows.end());
   }
   s.f.resize(n_rows);
-  for (size_t m = 0, r = 0; m < ms.size(); r += ms[m].model->num_dofs(), ++m)
-    s.f.segment(r, ms[m].model->num_dofs()) = ms[m].model->external_force();
+  for (size_t m = 0, r = 0; m < ms.size(); r += loads[m].size(), ++m)
+    s.f.segment(r, loads[m].size()) = loads[m];
   if (s.f.norm() == 0) throw Error("force-based inverse: the measurements carry no load");
   s.column_scale = s.A.norm() / std::sqrt(double(columns));
 

@@ -8,12 +8,15 @@
 /// measurement's loads: the probe, gravity) stacked over the measurements, with the
 /// spatial smoothness γ_s L_s (differences across shared faces, Eq. 5.26) and, for
 /// one parameter set per measurement, the smoothness γ_m L_m across measurements
-/// (§5.2.2). Solved by SuiteSparseQR; γ_s from the corner of the L-curve.
+/// (§5.2.2). A probe pressed to a depth holds its nodes: their rows are unknown,
+/// and its measured force (ClampReaction) adds the sum of them instead. Solved by
+/// SuiteSparseQR; γ_s from the corner of the L-curve.
 /// Kelvin's corotational material is Müller's warped stiffness
 /// K_e = R (λ_e C_e + μ_e D_e) Rᵀ (Eq. 5.14); any law linear in its parameters
 /// (neo-Hookean, Mooney–Rivlin, StVK) works the same way.
 #include <Eigen/Core>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "engine/fem_model.hpp"
@@ -27,6 +30,9 @@ namespace kelvin {
 struct StaticState {
   const FemModel* model = nullptr;
   Eigen::Matrix3Xd x;
+  /// Pressed probes whose force was measured: (the model's clamp index, R̄ in N); each
+  /// adds the three rows Σ_held A θ = R̄ + the held nodes' weight.
+  std::vector<std::pair<int, Eigen::Vector3d>> reactions = {};
 };
 
 struct ForceInverseOptions {

@@ -28,7 +28,7 @@ ProbingSpec load_probing(const Scenario& s) {
   const YAML::Node root = d.required(d.root(), "", "probing");
   const std::string P = "probing";
   d.require_map(root, P);
-  d.check_keys(root, P, {"measurements", "method", "grouping", "gamma", "weight"});
+  d.check_keys(root, P, {"measurements", "method", "grouping", "gamma", "weight", "noise"});
   ProbingSpec spec;
   if (const YAML::Node n = root["method"])
     spec.method = d.choice(n, join(P, "method"), {"displacement", "force"});
@@ -40,6 +40,13 @@ ProbingSpec load_probing(const Scenario& s) {
   }
   if (const YAML::Node n = root["gamma"]) spec.gamma = d.non_negative(n, join(P, "gamma"), "");
   if (const YAML::Node n = root["weight"]) spec.weight = d.positive(n, join(P, "weight"), "s");
+  if (const YAML::Node n = root["noise"]) {
+    const std::string NP = join(P, "noise");
+    d.require_map(n, NP);
+    d.check_keys(n, NP, {"markers", "force"});
+    spec.marker_noise = d.positive(d.required(n, NP, "markers"), join(NP, "markers"), "m");
+    spec.force_noise = d.positive(d.required(n, NP, "force"), join(NP, "force"), "N");
+  }
   const YAML::Node ms = d.required(root, P, "measurements");
   d.require_sequence(ms, join(P, "measurements"));
   if (ms.size() == 0) d.fail(ms, join(P, "measurements"), "needs at least one measurement");
@@ -48,14 +55,25 @@ ProbingSpec load_probing(const Scenario& s) {
     const YAML::Node m = ms[i];
     const std::string MP = index(join(P, "measurements"), i);
     d.require_map(m, MP);
-    d.check_keys(m, MP, {"name", "loads", "observed"});
+    d.check_keys(m, MP, {"name", "loads", "press", "observed"});
     ProbeMeasurementSpec pm;
     pm.name = d.string(d.required(m, MP, "name"), join(MP, "name"));
     for (const auto& other : spec.measurements)
       if (other.name == pm.name)
         d.fail(m["name"], join(MP, "name"),
                fmt::format("'{}' is taken by an earlier one", pm.name));
-    pm.loads = scenario_detail::load_loads(d, d.required(m, MP, "loads"), s.mesh, s.clamps);
+    if (!m["loads"] && !m["press"])
+      d.fail(m, MP, "give the probe as 'loads' (a force) or 'press' (a displacement), or both");
+    if (const YAML::Node p = m["press"])
+      pm.presses = scenario_detail::load_presses(d, p, join(MP, "press"), s.mesh, s.clamps);
+    std::vector<ClampSpec> held = s.clamps;
+    for (const auto& press : pm.presses) held.push_back(press.clamp);
+    if (const YAML::Node l = m["loads"]) pm.loads = scenario_detail::load_loads(d, l, s.mesh, held);
+    for (size_t k = 0; k < pm.presses.size(); ++k)
+      if (pm.presses[k].reaction.allFinite() && spec.force_noise < 0)
+        d.fail(m["press"][k]["reaction"], join(index(join(MP, "press"), k), "reaction"),
+               "a measured reaction needs probing.noise (markers: m, force: N) to weigh it "
+               "against the markers");
     pm.observed =
         Eigen::Matrix3Xd::Constant(3, markers.size(), std::numeric_limits<double>::quiet_NaN());
     if (const YAML::Node o = m["observed"]) {

@@ -14,8 +14,9 @@ namespace kelvin {
 
 struct ProbeMeasurementSpec {
   std::string name;
-  std::vector<LoadSpec> loads;  // what the probe adds to the scenario's loads
-  std::string observed_path;    // `name,x,y,z`; "" when not given (kelvin probe writes it)
+  std::vector<LoadSpec> loads;     // what a force-controlled probe adds to the scenario's loads
+  std::vector<PressSpec> presses;  // probes pressed to a depth
+  std::string observed_path;       // `name,x,y,z`; "" when not given (kelvin probe writes it)
   /// Per scenario marker (markers.rest order), its measured loaded position; NaN where
   /// the file has no row for it (occluded).
   Eigen::Matrix3Xd observed;
@@ -29,6 +30,14 @@ struct ProbingSpec {
   /// In a fit with captured motion: each measurement weighs like this many seconds
   /// of a captured track of its markers; < 0: the fitted scenario's duration.
   double weight = -1;
+  /// The measurements' noise, marker coordinates (m) and reaction forces (N): a measured
+  /// reaction's misfit weighs (markers/force)² against the markers'. Given together;
+  /// needed when a reaction is measured; < 0 when not given.
+  double marker_noise = -1, force_noise = -1;
+  /// (marker_noise / force_noise)², m²/N²: the reaction misfit's weight; 0 without noise.
+  double reaction_weight() const {
+    return force_noise > 0 ? (marker_noise / force_noise) * (marker_noise / force_noise) : 0;
+  }
 };
 
 /// True when the scenario file has a `probing:` section.

@@ -71,51 +71,86 @@ std::pair<std::vector<int>, int> element_groups(const Mesh& mesh, ElementGroupin
   return {group, static_cast<int>(labels.size())};
 }
 
+namespace {
+
+/// Element e's nodal forces per parameter k of `term`, V ∂P/∂q_k G (3 × 4 each), at
+/// full positions x; with require_linear, throws naming e where P ≠ Σ q ∂P/∂q.
+std::vector<Eigen::Matrix<double, 3, 4>> element_parameter_forces(const FemModel& model, int term,
+                                                                  const Eigen::Matrix3Xd& x, int e,
+                                                                  bool require_linear,
+                                                                  MaterialResponse& out) {
+  const MaterialTerm& t = model.terms()[term];
+  const int nq = static_cast<int>(t.model->params().size());
+  const TetElement& el = model.elements()[e];
+  Eigen::Matrix<double, 3, 4> xe;
+  for (int a = 0; a < 4; ++a) xe.col(a) = x.col(el.nodes[a]);
+  MaterialPoint p;
+  p.F = xe * el.G.transpose();
+  p.q = t.q.col(e).data();
+  p.state = t.state.size() ? t.state.col(e).data() : nullptr;
+  p.element = e;
+  p.rest_tangent = model.rest_tangent(e);
+  if (!t.model->evaluate(p, kStress | kParamDerivative, out))
+    throw Error(fmt::format("element {} is inadmissible (det F = {:.3g}) in the measured positions",
+                            e, p.F.determinant()));
+  if (require_linear) {
+    const Eigen::Map<const Eigen::VectorXd> q(p.q, nq);
+    const double scale = out.P.norm() + (out.dPdq * q.cwiseAbs()).norm();
+    if ((out.P.reshaped() - out.dPdq * q).norm() > 1e-8 * scale + 1e-300)
+      throw Error(fmt::format(
+          "the elastic model '{}' is not linear in its parameters (element {}: P ≠ Σ q ∂P/∂q); "
+          "use one that is, such as corotational (warped stiffness)",
+          t.model->name(), e));
+  }
+  std::vector<Eigen::Matrix<double, 3, 4>> f(nq);
+  for (int k = 0; k < nq; ++k) f[k] = el.volume * out.dPdq.col(k).reshaped(3, 3) * el.G;
+  return f;
+}
+
+}  // namespace
+
 Eigen::SparseMatrix<double> force_parameter_jacobian(const FemModel& model, int term,
                                                      const Eigen::Matrix3Xd& x,
                                                      const std::vector<int>& group, int columns,
                                                      int column_offset, bool require_linear) {
-  const MaterialTerm& t = model.terms()[term];
-  const int nq = static_cast<int>(t.model->params().size());
+  const int nq = static_cast<int>(model.terms()[term].model->params().size());
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(12 * nq * model.mesh().num_tets());
   MaterialResponse out;
   for (int e = 0; e < model.mesh().num_tets(); ++e) {
+    const auto f = element_parameter_forces(model, term, x, e, require_linear, out);
     const TetElement& el = model.elements()[e];
-    Eigen::Matrix<double, 3, 4> xe;
-    for (int a = 0; a < 4; ++a) xe.col(a) = x.col(el.nodes[a]);
-    MaterialPoint p;
-    p.F = xe * el.G.transpose();
-    p.q = t.q.col(e).data();
-    p.state = t.state.size() ? t.state.col(e).data() : nullptr;
-    p.element = e;
-    p.rest_tangent = model.rest_tangent(e);
-    if (!t.model->evaluate(p, kStress | kParamDerivative, out))
-      throw Error(
-          fmt::format("element {} is inadmissible (det F = {:.3g}) in the measured positions", e,
-                      p.F.determinant()));
-    if (require_linear) {
-      const Eigen::Map<const Eigen::VectorXd> q(p.q, nq);
-      const double scale = out.P.norm() + (out.dPdq * q.cwiseAbs()).norm();
-      if ((out.P.reshaped() - out.dPdq * q).norm() > 1e-8 * scale + 1e-300)
-        throw Error(fmt::format(
-            "the elastic model '{}' is not linear in its parameters (element {}: P ≠ Σ q ∂P/∂q); "
-            "use one that is, such as corotational (warped stiffness)",
-            t.model->name(), e));
-    }
     for (int k = 0; k < nq; ++k) {
-      const Eigen::Matrix3d dP = out.dPdq.col(k).reshaped(3, 3);
-      const Eigen::Matrix<double, 3, 4> f = el.volume * dP * el.G;
       const int col = column_offset + group[e] * nq + k;
       for (int a = 0; a < 4; ++a)
         for (int i = 0; i < 3; ++i) {
           const int d = model.dof(el.nodes[a], i);
-          if (d >= 0 && f(i, a) != 0) entries.emplace_back(d, col, f(i, a));
+          if (d >= 0 && f[k](i, a) != 0) entries.emplace_back(d, col, f[k](i, a));
         }
     }
   }
   Eigen::SparseMatrix<double> J(model.num_dofs(), columns);
   J.setFromTriplets(entries.begin(), entries.end());
+  return J;
+}
+
+Eigen::Matrix3Xd reaction_parameter_jacobian(const FemModel& model, int term,
+                                             const ClampReaction& press, const Eigen::Matrix3Xd& x,
+                                             const std::vector<int>& group, int columns,
+                                             int column_offset) {
+  const int nq = static_cast<int>(model.terms()[term].model->params().size());
+  Eigen::Matrix3Xd J = Eigen::Matrix3Xd::Zero(3, columns);
+  MaterialResponse out;
+  for (int e = 0; e < model.mesh().num_tets(); ++e) {
+    const TetElement& el = model.elements()[e];
+    bool touches = false;
+    for (int a = 0; a < 4; ++a) touches |= press.holds(el.nodes[a]);
+    if (!touches) continue;
+    const auto f = element_parameter_forces(model, term, x, e, false, out);
+    for (int k = 0; k < nq; ++k)
+      for (int a = 0; a < 4; ++a)
+        if (press.holds(el.nodes[a])) J.col(column_offset + group[e] * nq + k) += f[k].col(a);
+  }
   return J;
 }
 

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "engine/clamp_reaction.hpp"
 #include "engine/fem_model.hpp"
 
 namespace kelvin {
@@ -43,5 +44,12 @@ Eigen::SparseMatrix<double> force_parameter_jacobian(const FemModel& model, int 
                                                      const Eigen::Matrix3Xd& x,
                                                      const std::vector<int>& group, int columns,
                                                      int column_offset, bool require_linear);
+
+/// ∂R/∂θ of a pressed probe's reaction (engine/clamp_reaction.hpp) at full positions
+/// x: the held rows of the element forces, θ grouped as in force_parameter_jacobian.
+Eigen::Matrix3Xd reaction_parameter_jacobian(const FemModel& model, int term,
+                                             const ClampReaction& press, const Eigen::Matrix3Xd& x,
+                                             const std::vector<int>& group, int columns,
+                                             int column_offset = 0);
 
 }  // namespace kelvin

@@ -3,6 +3,7 @@
 // loaded, clamp selections are node lists, CSV files are read, markers embedded.
 // The engine builds a model from this without knowing about YAML.
 #include <Eigen/Core>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -83,6 +84,17 @@ struct ClampSpec {
   std::shared_ptr<RigidMotion> motion;  // FixedMotion when none is given
   double compliance = 0;                // m³/N; > 0: held by springs (ClampBinding)
   double damping_time = 0;              // s, the pads' retardation time, with compliance only
+  bool ramped = false;                  // a pressed probe (PressSpec), never from `clamps:`
+};
+
+/// `probing.measurements[].press:` entry: a probe pressed to a depth. Its nodes are
+/// held at rest + `displacement` (a ramped clamp: static load steps bring it in), and
+/// the force it exerts on the body may have been measured.
+struct PressSpec {
+  ClampSpec clamp;  // ramped; its motion the translation `displacement`
+  Eigen::Vector3d displacement = Eigen::Vector3d::Zero();
+  /// N, the measured force of the probe on the body; NaN when not measured.
+  Eigen::Vector3d reaction = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
 };
 
 /// `loads:` entry: a constant force and/or an attached mass carried by the

@@ -285,6 +285,37 @@ std::vector<LoadSpec> load_loads(const Doc& d, const Node& n, const Mesh& mesh,
   return loads;
 }
 
+std::vector<PressSpec> load_presses(const Doc& d, const Node& n, const std::string& P0,
+                                    const Mesh& mesh, const std::vector<ClampSpec>& clamps) {
+  d.require_sequence(n, P0);
+  std::map<int, std::string> owner;  // node → clamp or press holding it
+  for (const auto& c : clamps)
+    for (int i : c.nodes) owner.emplace(i, "clamp '" + c.name + "'");
+  std::vector<PressSpec> presses;
+  std::vector<ClampSpec> earlier;
+  for (size_t k = 0; k < n.size(); ++k) {
+    const Node e = n[k];
+    const std::string P = index(P0, k);
+    d.check_keys(e, P, {"name", "select", "displacement", "reaction"});
+    PressSpec press;
+    ClampSpec& spec = press.clamp;
+    spec.name = unique_name(d, e, P, "press", k, earlier);
+    select_entry_nodes(d, e, P, mesh, spec.selection, spec.nodes);
+    for (int i : spec.nodes)
+      if (auto [it, fresh] = owner.emplace(i, "press '" + spec.name + "'"); !fresh)
+        d.fail(e["select"], join(P, "select"),
+               fmt::format("node {} is held by {} already; a node can follow only one motion", i,
+                           it->second));
+    press.displacement = d.vec3(d.required(e, P, "displacement"), join(P, "displacement"));
+    if (const Node r = e["reaction"]) press.reaction = d.vec3(r, join(P, "reaction"));
+    spec.motion = std::make_shared<TranslatedMotion>(press.displacement);
+    spec.ramped = true;
+    earlier.push_back(spec);
+    presses.push_back(std::move(press));
+  }
+  return presses;
+}
+
 MarkersSpec load_markers(const Doc& d, const Node& n, const Mesh& mesh) {
   const std::string P = "markers";
   d.check_keys(n, P, {"rest", "observed", "tolerance"});

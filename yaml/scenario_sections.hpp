@@ -17,6 +17,11 @@ std::vector<ClampSpec> load_clamps(const yamlutil::Doc& d, const YAML::Node& nod
 /// The `loads:` section; needs the clamps, whose nodes carry no load.
 std::vector<LoadSpec> load_loads(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh,
                                  const std::vector<ClampSpec>& clamps);
+/// A static measurement's `press:` list at path P (probes pressed to a depth); their
+/// nodes may be held by no clamp nor other press.
+std::vector<PressSpec> load_presses(const yamlutil::Doc& d, const YAML::Node& node,
+                                    const std::string& P, const Mesh& mesh,
+                                    const std::vector<ClampSpec>& clamps);
 MarkersSpec load_markers(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh);
 /// The `fit:` section, checked against the rest of the scenario (material, markers, time).
 FitSpec load_fit(const yamlutil::Doc& d, const YAML::Node& node, const Scenario& s);
