@@ -297,6 +297,18 @@ TEST(PressedProbe, BadPressEntriesAreNamedWithTheirPlace) {
             std::string::npos);
 }
 
+TEST(PressedProbe, TheBundledExampleReadsItsPressesAndForces) {
+  const Scenario s = load_scenario(KELVIN_SOURCE_DIR "/yaml/examples/probe-foam-pressed.yaml");
+  const ProbingSpec spec = load_probing(s);
+  ASSERT_EQ(spec.measurements.size(), 3u);
+  EXPECT_DOUBLE_EQ(spec.reaction_weight(), (5e-5 / 0.01) * (5e-5 / 0.01));
+  for (const auto& m : spec.measurements) {
+    ASSERT_EQ(m.presses.size(), 1u) << m.name;
+    EXPECT_TRUE(m.presses[0].reaction.allFinite()) << m.name;
+    EXPECT_TRUE(m.observed.allFinite()) << m.name;
+  }
+}
+
 TEST(PressCli, ProbeWritesTheReactionsAndProbeFitReportsTheirMisfit) {
   const path dir = test::scratch("press-cli");
   const Truth t = truth_data(dir);
