@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -519,4 +520,85 @@ TEST(ProbeCli, BlendsTheSetsProbeFitWroteAndEachMeasurementTakesItsOwn) {
   EXPECT_NE(r.out.find("c0.5.csv:1: the header must be element,elastic.lambda,elastic.mu,strain"),
             std::string::npos)
       << r.out;
+}
+
+namespace {
+
+/// Marker rms (m) of a light (0.3 N, x = 0.01) and a deep (2.0 N, x = 0.03) contact
+/// pressed at once, predicted from sets fitted to `training` probes: one set, and
+/// the sets blended by the strain level and by the local metric.
+std::array<double, 3> predict_light_and_deep(const std::vector<Probe>& training) {
+  const Mesh mesh = generate_box({0, 0, 0}, {0.04, 0.04, 0.02}, 0.01);
+  const auto top = nodes_where(mesh, [](const Eigen::Vector3d& X) { return X.z() > 0.0199; });
+  std::vector<std::unique_ptr<FemModel>> models;
+  std::vector<ObservedProbe> probes;
+  std::vector<std::string> names;
+  for (const Probe& probe : training) {
+    const Eigen::Matrix3Xd x =
+        equilibrium(*probed_model(mesh, "neo-hookean", uniform(mesh, kLambda, kMu), probe));
+    models.push_back(probed_model(mesh, "corotational", uniform(mesh, kLambda, kMu), probe));
+    probes.push_back(node_markers(*models.back(), top, x));
+    names.push_back(fmt::format("{:.1f} N at x {:.3f}", -probe.force.z(), probe.at.x()));
+  }
+  DisplacementInverseOptions fit;
+  fit.relative_tolerance = 1e-8;
+  const std::vector<ParameterSet> sets = fit_parameter_sets(probes, names, fit);
+  const DisplacementInverseResult single = displacement_based_inverse(probes, fit);
+
+  auto two_probes = [&](const std::string& law, const Eigen::MatrixXd& q) {
+    NodeSelection base;
+    base.axis = 2, base.at = 0;
+    std::vector<ClampBinding> clamps{
+        {"table", select_nodes(mesh, base), std::make_shared<FixedMotion>()}};
+    NodeLoad light{"light", {}, {0, 0, -0.3}, 0}, deep{"deep", {}, {0, 0, -2.0}, 0};
+    for (int a = 0; a < mesh.num_nodes(); ++a) {
+      const Eigen::Vector3d X = mesh.nodes.col(a);
+      if (std::abs(X.z() - 0.02) > 1e-9) continue;
+      if ((X.head<2>() - Eigen::Vector2d(0.01, 0.02)).norm() <= 0.006) light.nodes.push_back(a);
+      if ((X.head<2>() - Eigen::Vector2d(0.03, 0.02)).norm() <= 0.006) deep.nodes.push_back(a);
+    }
+    std::vector<MaterialTerm> terms{{create_builtin_material(law), q, {}}};
+    return std::make_unique<FemModel>(
+        mesh, std::move(terms), Eigen::VectorXd::Constant(mesh.num_tets(), 60.0),
+        Eigen::Vector3d::Zero(), clamps, true, std::vector<NodeLoad>{light, deep});
+  };
+  const Eigen::Matrix3Xd truth =
+      equilibrium(*two_probes("neo-hookean", uniform(mesh, kLambda, kMu)));
+  auto held = two_probes("corotational", single.q);
+  const ObservedProbe seen = node_markers(*held, top, truth);
+  std::array<double, 3> rms{marker_rms(seen, equilibrium(*held)), 0, 0};
+  for (int b = 0; b < 2; ++b) {
+    BlendOptions o;
+    o.metric = b == 0 ? BlendMetric::kGlobal : BlendMetric::kLocal;
+    const BlendedEquilibrium r = blended_equilibrium(*held, Blender(mesh, sets, o));
+    EXPECT_GT(r.x.size(), 0) << r.message;
+    EXPECT_TRUE(r.converged) << r.message;
+    rms[1 + b] = r.x.size() ? marker_rms(seen, r.x) : INFINITY;
+  }
+  std::printf("light and deep at once: one set %.4f mm, strain level %.4f mm, local %.4f mm\n",
+              1e3 * rms[0], 1e3 * rms[1], 1e3 * rms[2]);
+  return rms;
+}
+
+}  // namespace
+
+TEST(Blending, TheLocalMetricTakesEachPlacesSetWhereTheSetsStrainedThosePlaces) {
+  // A light and a deep contact pressed at once strain the body unevenly: one strain
+  // level for the whole body takes the deep sets everywhere, the local metric (Eq.
+  // 6.11) takes the light set where the body is strained like the light contact
+  // strained it. It compares strains place by place, so it needs sets that strained
+  // the places the new contact strains: with sets from the same places it wins;
+  // with sets from a probe at the centre only, it extrapolates each element's strain
+  // and loses to the strain level.
+  const std::array<double, 3> same_places = predict_light_and_deep({{{0.01, 0.02}, {0, 0, -0.3}},
+                                                                    {{0.01, 0.02}, {0, 0, -2.0}},
+                                                                    {{0.03, 0.02}, {0, 0, -0.3}},
+                                                                    {{0.03, 0.02}, {0, 0, -2.0}}});
+  EXPECT_LT(same_places[2], same_places[1]);
+  EXPECT_LT(same_places[2], same_places[0]);
+  const std::array<double, 3> centre_only = predict_light_and_deep({{{0.02, 0.02}, {0, 0, -0.4}},
+                                                                    {{0.02, 0.02}, {0, 0, -1.0}},
+                                                                    {{0.02, 0.02}, {0, 0, -1.6}},
+                                                                    {{0.02, 0.02}, {0, 0, -2.2}}});
+  EXPECT_GT(centre_only[2], centre_only[1]);
 }
