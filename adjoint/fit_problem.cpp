@@ -178,7 +178,9 @@ Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions&
     StaticTermResult r = st->evaluate(*map_, p, options.method != GradientMethod::kNone);
     if (!r.ok && ev.ok) ev.ok = false, ev.error = r.error;
     ev.phi += r.phi;
-    weighted_time += st->weight() * st->observed_markers();
+    // A measured reaction counts as one more marker: its residual is in units of
+    // the marker noise (StaticTerm).
+    weighted_time += st->weight() * (st->observed_markers() + st->measured_reactions());
     if (r.ok && r.gradient.size()) ev.gradient += r.gradient;
     ev.statics.push_back(std::move(r));
   }

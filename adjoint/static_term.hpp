@@ -45,6 +45,7 @@ class StaticTerm {
   double weight() const { return weight_; }
   void set_weight(double w) { weight_ = w; }
   int observed_markers() const { return observed_count_; }
+  int measured_reactions() const { return static_cast<int>(reactions_.size()); }
   FemModel& model() { return model_; }
 
   /// Φ_s and, when asked, dΦ_s/dp at p (applied to the model first). A trial without

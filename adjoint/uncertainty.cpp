@@ -131,8 +131,8 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   u.observations = N;
   if (N <= n) {
     u.error = fmt::format(
-        "{} observed marker coordinates cannot determine {} parameters and the noise level: "
-        "more observations than parameters are needed",
+        "{} observations (marker coordinates, measured force components) cannot determine {} "
+        "parameters and the noise level: more observations than parameters are needed",
         N, n);
     return u;
   }

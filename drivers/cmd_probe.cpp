@@ -202,15 +202,18 @@ void run_probe_fit(const Args& a) {
       throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",
                               s.path, m.name));
   ProbeExperiment ex(s, spec);
-  bool forced = false;  // does any measurement say how hard the probe pushed?
+  bool forced = false;  // does any known force set the moduli's scale?
+  for (const auto& l : s.loads) forced |= l.force.norm() > 0 || l.mass > 0;
   for (int m = 0; m < ex.size(); ++m) {
     forced |= !ex.measured_reactions(m).empty();
     for (const auto& l : spec.measurements[m].loads) forced |= l.force.norm() > 0 || l.mass > 0;
   }
   if (!forced)
-    fmt::print(
-        "note: no measurement has a probe force (loads) or a measured reaction (press.reaction): "
-        "only the body's own weight sets the moduli's scale\n");
+    fmt::print("note: no load has a force or mass and no press a measured reaction: {}\n",
+               s.gravity.norm() > 0
+                   ? "only the body's own weight sets the moduli's scale"
+                   : "nothing sets the moduli's scale (no gravity either); only their "
+                     "ratios are fitted");
   if (const std::string why = prepare_output_dir(a.outdir); !why.empty()) throw Error(why);
   std::vector<std::string> names;
   Eigen::MatrixXd q;

@@ -65,17 +65,20 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
   const bool pressed = std::any_of(model.clamps().begin(), model.clamps().end(),
                                    [](const ClampBinding& c) { return c.ramped; });
   double imbalance = 0;
-  if (R.eval(x_free, 1.0, false, g))
+  // True while the force scale lacks the press's share: the start was checked at rest.
+  bool scale_from_press = false;
+  if (R.eval(x_free, 1.0, false, g)) {
     imbalance = g.norm();
-  else if (!pressed || !R.eval(x_free, 0.0, false, g)) {
+  } else if (!pressed || !R.eval(x_free, 0.0, false, g)) {
     res.message =
         fmt::format("element {} is inverted in the starting configuration", R.out.failed_element);
     return res;
-  } else
+  } else {
     imbalance = g.norm();
+    scale_from_press = true;
+  }
   // Forces are compared to the load, or to the initial imbalance when there is no load.
-  const double scale =
-      std::max({opt.load_fraction * model.external_force().norm(), imbalance, 1e-300});
+  double scale = std::max({opt.load_fraction * model.external_force().norm(), imbalance, 1e-300});
   // Newton corrections below this length (1e-12 of the body's size) are round-off.
   const Eigen::Matrix3Xd& X = model.mesh().nodes;
   const double negligible = 1e-12 * (X.rowwise().maxCoeff() - X.rowwise().minCoeff()).norm();
@@ -99,6 +102,12 @@ StaticResult solve_static(const FemModel& model, double t, Eigen::VectorXd& x_fr
     for (int it = 0; it < opt.max_iterations; ++it) {
       double pi0 = 0;  // potential energy at x, for the line search
       if (!R.eval(x, target, true, g, hyperelastic ? &pi0 : nullptr)) break;
+      if (scale_from_press && it == 0) {
+        // From the last equilibrium the imbalance is the press's increment alone:
+        // scaled to its full depth, it is the force the press brings.
+        scale = std::max(scale, g.norm() / (target - s));
+        scale_from_press = false;
+      }
       res.residual = g.norm() / scale;
       if (res.residual <= opt.tolerance) {
         ok = true;

@@ -69,6 +69,18 @@ ProbingSpec load_probing(const Scenario& s) {
     std::vector<ClampSpec> held = s.clamps;
     for (const auto& press : pm.presses) held.push_back(press.clamp);
     if (const YAML::Node l = m["loads"]) pm.loads = scenario_detail::load_loads(d, l, s.mesh, held);
+    // A held node carries no load: a load under a press would move to its other nodes.
+    std::vector<const LoadSpec*> loads;
+    for (const auto& l : s.loads) loads.push_back(&l);
+    for (const auto& l : pm.loads) loads.push_back(&l);
+    for (size_t k = 0; k < pm.presses.size(); ++k)
+      for (const LoadSpec* l : loads)
+        for (int node : l->nodes)
+          if (std::count(pm.presses[k].clamp.nodes.begin(), pm.presses[k].clamp.nodes.end(), node))
+            d.fail(m["press"][k]["select"], join(index(join(MP, "press"), k), "select"),
+                   fmt::format("node {} carries load '{}'; a pressed node is held and carries "
+                               "none (select the load's nodes apart from the press's)",
+                               node, l->name));
     for (size_t k = 0; k < pm.presses.size(); ++k)
       if (pm.presses[k].reaction.allFinite() && spec.force_noise < 0)
         d.fail(m["press"][k]["reaction"], join(index(join(MP, "press"), k), "reaction"),
