@@ -193,10 +193,8 @@ void run_probe_fit(const Args& a) {
                     : a.grouping == "region" ? ElementGrouping::kRegion
                                              : ElementGrouping::kElement;
   if (a.gamma >= 0) spec.gamma = a.gamma;
-  if ((a.sets || a.cross_validate) && spec.method != "displacement")
-    throw Error(
-        "--sets and --cross-validate fit with the displacement-based inverse (method: "
-        "displacement)");
+  if (a.cross_validate && spec.method != "displacement")
+    throw Error("--cross-validate fits with the displacement-based inverse (method: displacement)");
   for (const auto& m : spec.measurements)
     if (m.observed_path.empty())
       throw Error(fmt::format("{}: measurement '{}' has no observed positions (observed: file)",
@@ -259,8 +257,17 @@ void run_probe_fit(const Args& a) {
   if (a.sets) {
     // From the scenario's start values, like the fit above.
     ProbeExperiment fresh(s, spec);
-    std::vector<ObservedProbe> probes = fresh.observed();
-    const auto sets = fit_parameter_sets(probes, measurement_names, o);
+    std::vector<ParameterSet> sets;
+    if (spec.method == "force") {
+      ForceInverseOptions fo;
+      fo.grouping = spec.grouping;
+      fo.gamma_space = spec.gamma;
+      fo.gamma_measurement = spec.gamma_measurements;
+      sets = force_parameter_sets(fresh.node_positions(), measurement_names, fo);
+    } else {
+      std::vector<ObservedProbe> probes = fresh.observed();
+      sets = fit_parameter_sets(probes, measurement_names, o);
+    }
     const std::filesystem::path dir = std::filesystem::path(a.outdir) / "sets";
     std::filesystem::create_directories(dir);
     // probe --blend reads every set here: ones of an earlier run would join the blend.

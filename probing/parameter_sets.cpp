@@ -39,6 +39,18 @@ std::vector<ParameterSet> fit_parameter_sets(std::vector<ObservedProbe>& measure
   return sets;
 }
 
+std::vector<ParameterSet> force_parameter_sets(const std::vector<StaticState>& measurements,
+                                               const std::vector<std::string>& names,
+                                               ForceInverseOptions options) {
+  options.per_measurement = true;
+  const ForceInverseResult r = force_based_inverse(measurements, options);
+  std::vector<ParameterSet> sets;
+  for (size_t m = 0; m < measurements.size(); ++m)
+    sets.push_back(
+        {names[m], r.q[m], element_strains(measurements[m].model->mesh(), measurements[m].x)});
+  return sets;
+}
+
 std::string parameter_set_csv(const std::vector<std::string>& parameters, const ParameterSet& set) {
   std::string s = "element";
   for (const auto& p : parameters) s += ",elastic." + p;

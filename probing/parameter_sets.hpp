@@ -9,6 +9,7 @@
 
 #include "probing/blending.hpp"
 #include "probing/displacement_inverse.hpp"
+#include "probing/force_inverse.hpp"
 
 namespace kelvin {
 
@@ -18,6 +19,13 @@ namespace kelvin {
 std::vector<ParameterSet> fit_parameter_sets(std::vector<ObservedProbe>& measurements,
                                              const std::vector<std::string>& names,
                                              const DisplacementInverseOptions& options);
+
+/// One set per measurement from the force-based inverse, all fitted at once with the
+/// smoothness across measurements (options.gamma_measurement, Bächer §5.2.2), each
+/// with the strain at its measured positions; options.per_measurement is implied.
+std::vector<ParameterSet> force_parameter_sets(const std::vector<StaticState>& measurements,
+                                               const std::vector<std::string>& names,
+                                               ForceInverseOptions options);
 
 /// `element,elastic.<p>…,strain.E11,…,strain.E12` rows (the strain as in
 /// element_strains).

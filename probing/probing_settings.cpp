@@ -28,7 +28,9 @@ ProbingSpec load_probing(const Scenario& s) {
   const YAML::Node root = d.required(d.root(), "", "probing");
   const std::string P = "probing";
   d.require_map(root, P);
-  d.check_keys(root, P, {"measurements", "method", "grouping", "gamma", "weight", "noise"});
+  d.check_keys(
+      root, P,
+      {"measurements", "method", "grouping", "gamma", "gamma_measurements", "weight", "noise"});
   ProbingSpec spec;
   if (const YAML::Node n = root["method"])
     spec.method = d.choice(n, join(P, "method"), {"displacement", "force"});
@@ -39,6 +41,8 @@ ProbingSpec load_probing(const Scenario& s) {
                                     : ElementGrouping::kElement;
   }
   if (const YAML::Node n = root["gamma"]) spec.gamma = d.non_negative(n, join(P, "gamma"), "");
+  if (const YAML::Node n = root["gamma_measurements"])
+    spec.gamma_measurements = d.non_negative(n, join(P, "gamma_measurements"), "");
   if (const YAML::Node n = root["weight"]) spec.weight = d.positive(n, join(P, "weight"), "s");
   if (const YAML::Node n = root["noise"]) {
     const std::string NP = join(P, "noise");

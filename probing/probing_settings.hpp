@@ -27,6 +27,8 @@ struct ProbingSpec {
   std::string method = "displacement";  // displacement | force
   ElementGrouping grouping = ElementGrouping::kGlobal;
   double gamma = -1;  // smoothness (relative); < 0: the L-curve (force) or 0 (displacement)
+  /// Smoothness across the per-measurement sets of the force-based inverse (relative).
+  double gamma_measurements = 1e-2;
   /// In a fit with captured motion: each measurement weighs like this many seconds
   /// of a captured track of its markers; < 0: the fitted scenario's duration.
   double weight = -1;

@@ -204,6 +204,20 @@ TEST(ForceInverse, OneSetPerMeasurementRecoversEachProbesOwnModulus) {
   const ForceInverseResult r = force_based_inverse(states, o);
   ASSERT_EQ(r.q.size(), 2u);
   for (int m = 0; m < 2; ++m) EXPECT_NEAR(r.q[m](1, 0), mus[m], 1e-6 * mus[m]);
+
+  // As blendable sets: each with the strain at its measured positions, the softer
+  // one strained more; the smoothness across measurements pulls them together.
+  o.per_measurement = false;
+  const auto sets = force_parameter_sets(states, {"soft", "stiff"}, o);
+  ASSERT_EQ(sets.size(), 2u);
+  for (int m = 0; m < 2; ++m) {
+    EXPECT_NEAR(sets[m].q(1, 0), mus[m], 1e-6 * mus[m]);
+    EXPECT_LT((sets[m].strain - element_strains(mesh, states[m].x)).norm(), 1e-15);
+  }
+  EXPECT_GT(strain_level(mesh, sets[0].strain), 1.5 * strain_level(mesh, sets[1].strain));
+  o.gamma_measurement = 10;
+  const auto tied = force_parameter_sets(states, {"soft", "stiff"}, o);
+  EXPECT_LT(tied[1].q(1, 0) / tied[0].q(1, 0), 1.5);
 }
 
 TEST(ForceInverse, ALawNotLinearInItsParametersIsRefusedWithTheElement) {
@@ -601,4 +615,61 @@ TEST(Blending, TheLocalMetricTakesEachPlacesSetWhereTheSetsStrainedThosePlaces) 
                                                                     {{0.02, 0.02}, {0, 0, -1.6}},
                                                                     {{0.02, 0.02}, {0, 0, -2.2}}});
   EXPECT_GT(centre_only[2], centre_only[1]);
+}
+
+TEST(ProbeCli, ForceBasedSetsFromEveryNodesMarkerAreBlended) {
+  // A marker on every node: probe-fit --sets with the force-based inverse writes the
+  // sets of one linear solve, and probe --blend takes them like displacement-based ones.
+  const auto dir = test::scratch("probe-force-sets");
+  const Mesh mesh = generate_box({0, 0, 0}, {0.04, 0.04, 0.02}, 0.01);
+  std::string markers = "name,x,y,z\n";
+  for (int a = 0; a < mesh.num_nodes(); ++a)
+    markers += fmt::format("n{},{:.17g},{:.17g},{:.17g}\n", a, mesh.nodes(0, a), mesh.nodes(1, a),
+                           mesh.nodes(2, a));
+  test::write_text(dir / "markers.csv", markers);
+  auto scenario = [&](const std::string& law, const std::string& observed) {
+    std::string s =
+        "mesh: { generate: box, lo: [0, 0, 0], hi: [0.04, 0.04, 0.02], element_size: 0.01 }\n"
+        "material: { density: 60, elastic: { model: " +
+        law +
+        ", lambda: 2e4, mu: 1e4 } }\n"
+        "clamps: [{ name: table, select: { plane: { axis: z, at: 0 } } }]\n"
+        "markers: { rest: markers.csv }\n"
+        "probing:\n  method: force\n  measurements:\n";
+    for (const char* f : {"0.5", "1.5", "2.5"})
+      s += fmt::format(
+          "    - {{ name: c{0}, loads: [{{ name: p, select: {{ box: {{ lo: [0.014, 0.014, "
+          "0.0199], hi: [0.026, 0.026, 0.0201] }} }}, force: [0, 0, -{0}] }}]{1} }}\n",
+          f, observed.empty() ? "" : fmt::format(", observed: {}/c{}.csv", observed, f));
+    return s;
+  };
+  test::write_text(dir / "truth.yaml", scenario("neo-hookean", ""));
+  test::CliRun r =
+      test::run_kelvin("probe " + (dir / "truth.yaml").string() + " -o " + (dir / "seen").string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  test::write_text(dir / "s.yaml", scenario("corotational", (dir / "seen").string()));
+  const std::string s = (dir / "s.yaml").string();
+  r = test::run_kelvin("probe-fit " + s + " -o " + (dir / "fit").string() + " --sets");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  // The neo-Hookean foam stiffens under the deeper probes: their sets are stiffer.
+  double mu[3];
+  int k = 0;
+  for (const char* f : {"0.5", "1.5", "2.5"}) {
+    const std::string set = test::read_text(dir / "fit" / "sets" / fmt::format("c{}.csv", f));
+    ASSERT_EQ(set.rfind("element,elastic.lambda,elastic.mu,strain.E11,", 0), 0u) << set;
+    double lambda = 0;
+    ASSERT_EQ(std::sscanf(set.c_str() + set.find('\n') + 1, "0,%lf,%lf", &lambda, &mu[k]), 2);
+    ++k;
+  }
+  EXPECT_LT(mu[0], mu[1]);
+  EXPECT_LT(mu[1], mu[2]);
+  r = test::run_kelvin("probe " + s + " -o " + (dir / "sim").string() + " --blend " +
+                       (dir / "fit").string());
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("blending 3 parameter sets"), std::string::npos) << r.out;
+  r = test::run_kelvin("probe-fit " + s + " -o " + (dir / "cv").string() + " --cross-validate");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("--cross-validate fits with the displacement-based inverse"),
+            std::string::npos)
+      << r.out;
 }
