@@ -7,7 +7,6 @@
 #include <cmath>
 #include <memory>
 
-#include "engine/clamp_reaction.hpp"
 #include "engine/param_derivatives.hpp"
 #include "engine/static_solver.hpp"
 
@@ -75,6 +74,11 @@ bool StaticTerm::factor_stiffness(const Eigen::Matrix3Xd& x, std::string& error)
   return false;
 }
 
+std::string StaticTerm::inadmissible(const ClampReaction& press) const {
+  return fmt::format("static measurement '{}': element {} is inadmissible at equilibrium", name_,
+                     press.failed_element);
+}
+
 bool StaticTerm::reaction_misfits(const Eigen::Matrix3Xd& x, std::vector<Eigen::Vector3d>& misfit,
                                   std::string& error) const {
   misfit.clear();
@@ -82,8 +86,7 @@ bool StaticTerm::reaction_misfits(const Eigen::Matrix3Xd& x, std::vector<Eigen::
     const ClampReaction press(model_, clamp);
     Eigen::Vector3d R;
     if (!press.force(x, R)) {
-      error = fmt::format("static measurement '{}': element {} is inadmissible at equilibrium",
-                          name_, press.failed_element);
+      error = inadmissible(press);
       return false;
     }
     misfit.push_back(R - seen);
@@ -128,8 +131,7 @@ StaticTermResult StaticTerm::evaluate(const ParameterMap& map, const Eigen::Vect
     const Eigen::Vector3d w = weight_ * reaction_weight_ * misfit[k];
     if (!press.add_position_adjoint(x, w, rhs)) {
       out.ok = false;
-      out.error = fmt::format("static measurement '{}': element {} is inadmissible at equilibrium",
-                              name_, press.failed_element);
+      out.error = inadmissible(press);
       return out;
     }
     for (int a : model_.clamps()[reactions_[k].first].nodes) held.col(a) -= w;
@@ -190,22 +192,14 @@ bool StaticTerm::residuals(const ParameterMap& map, const Eigen::VectorXd& p, bo
   jacobian.resize(0, map.size());
   if (!with_jacobian) return true;
   if (!factor_stiffness(x, error)) return false;
-  // Per reaction: the rows of ∂R/∂x_free, as (∂R/∂x_free)ᵀ e_i.
-  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> dR_dx;
-  for (const auto& [clamp, seen] : reactions_) {
-    const ClampReaction press(model_, clamp);
-    Eigen::Matrix<double, Eigen::Dynamic, 3> rows =
-        Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(model_.num_dofs(), 3);
-    for (int i = 0; i < 3; ++i) {
-      Eigen::VectorXd col = Eigen::VectorXd::Zero(model_.num_dofs());
-      if (!press.add_position_adjoint(x, Eigen::Vector3d::Unit(i), col)) {
-        error = fmt::format("static measurement '{}': element {} is inadmissible at equilibrium",
-                            name_, press.failed_element);
-        return false;
-      }
-      rows.col(i) = col;
+  // Per reaction: (∂R/∂x_free)ᵀ.
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> dR_dx(reactions_.size());
+  for (size_t k = 0; k < reactions_.size(); ++k) {
+    const ClampReaction press(model_, reactions_[k].first);
+    if (!press.position_rows(x, dR_dx[k])) {
+      error = inadmissible(press);
+      return false;
     }
-    dR_dx.push_back(std::move(rows));
   }
   // B = ∂R/∂p over the free dofs, then dx/dp = −K⁻¹ B column by column.
   Eigen::MatrixXd B = Eigen::MatrixXd::Zero(model_.num_dofs(), map.size());

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "adjoint/parameter_map.hpp"
+#include "engine/clamp_reaction.hpp"
 #include "engine/fem_model.hpp"
 #include "engine/markers.hpp"
 
@@ -81,6 +82,8 @@ class StaticTerm {
   bool factor_stiffness(const Eigen::Matrix3Xd& x, std::string& error);
   /// R − R̄ of each measured reaction at x; false with `error` set when a material
   /// rejects x.
+  /// The message for a press whose elements a material rejects.
+  std::string inadmissible(const ClampReaction& press) const;
   bool reaction_misfits(const Eigen::Matrix3Xd& x, std::vector<Eigen::Vector3d>& misfit,
                         std::string& error) const;
   std::function<Eigen::VectorXd(const Eigen::VectorXd&)> solve_;

@@ -36,8 +36,9 @@ bool ClampReaction::force(const Eigen::Matrix3Xd& x, Eigen::Vector3d& R) const {
   return true;
 }
 
-bool ClampReaction::add_position_adjoint(const Eigen::Matrix3Xd& x, const Eigen::Vector3d& w,
-                                         Eigen::VectorXd& out) const {
+bool ClampReaction::position_rows(const Eigen::Matrix3Xd& x,
+                                  Eigen::Matrix<double, Eigen::Dynamic, 3>& rows) const {
+  rows.setZero(model_.num_dofs(), 3);
   const Eigen::Matrix3Xd v = Eigen::Matrix3Xd::Zero(3, x.cols());
   ElementResponse resp;
   for (int e : elements_) {
@@ -48,14 +49,23 @@ bool ClampReaction::add_position_adjoint(const Eigen::Matrix3Xd& x, const Eigen:
     const TetElement& el = model_.elements()[e];
     Eigen::Matrix<double, 12, 12> Ke = Eigen::Matrix<double, 12, 12>::Zero();
     accumulate_element_matrix(el, resp.dPdF, 1.0, Ke);
-    Eigen::Matrix<double, 12, 1> wl = Eigen::Matrix<double, 12, 1>::Zero();
+    // ∂R_i/∂x_(b,j) sums the held rows (a, i) of Ke.
+    Eigen::Matrix<double, 3, 12> held_rows = Eigen::Matrix<double, 3, 12>::Zero();
     for (int a = 0; a < 4; ++a)
-      if (held_[el.nodes[a]]) wl.segment<3>(3 * a) = w;
-    const Eigen::Matrix<double, 12, 1> g = Ke.transpose() * wl;
+      if (held_[el.nodes[a]]) held_rows += Ke.middleRows<3>(3 * a);
     for (int b = 0; b < 4; ++b)
       for (int j = 0; j < 3; ++j)
-        if (const int d = model_.dof(el.nodes[b], j); d >= 0) out[d] += g[3 * b + j];
+        if (const int d = model_.dof(el.nodes[b], j); d >= 0)
+          rows.row(d) += held_rows.col(3 * b + j).transpose();
   }
+  return true;
+}
+
+bool ClampReaction::add_position_adjoint(const Eigen::Matrix3Xd& x, const Eigen::Vector3d& w,
+                                         Eigen::VectorXd& out) const {
+  Eigen::Matrix<double, Eigen::Dynamic, 3> rows;
+  if (!position_rows(x, rows)) return false;
+  out += rows * w;
   return true;
 }
 

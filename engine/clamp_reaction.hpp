@@ -24,6 +24,9 @@ class ClampReaction {
   /// R at full positions x; false (element in failed_element) when a material
   /// rejects x.
   bool force(const Eigen::Matrix3Xd& x, Eigen::Vector3d& R) const;
+  /// (∂R/∂x_free)ᵀ into `rows` (free dofs × 3); false when a material rejects x.
+  bool position_rows(const Eigen::Matrix3Xd& x,
+                     Eigen::Matrix<double, Eigen::Dynamic, 3>& rows) const;
   /// Adds (∂R/∂x_free)ᵀ w into `out` (free dofs); false when a material rejects x.
   bool add_position_adjoint(const Eigen::Matrix3Xd& x, const Eigen::Vector3d& w,
                             Eigen::VectorXd& out) const;

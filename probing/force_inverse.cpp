@@ -120,23 +120,27 @@ ForceInverseResult force_based_inverse(const std::vector<StaticState>& ms,
     try {
       Eigen::SparseMatrix<double> rows =
           force_parameter_jacobian(model, term, ms[m].x, group, columns, set * groups * nq, true);
-      Eigen::VectorXd f = model.external_force();
-      for (const auto& [clamp, seen] : ms[m].reactions) {
-        const ClampReaction press(model, clamp);
-        const Eigen::Matrix3Xd held = reaction_parameter_jacobian(
-            model, term, press, ms[m].x, group, columns, set * groups * nq);
-        Eigen::SparseMatrix<double> grown(rows.rows() + 3, columns);
+      const int n = static_cast<int>(rows.rows()),
+                extra = 3 * static_cast<int>(ms[m].reactions.size());
+      Eigen::VectorXd f(n + extra);
+      f.head(n) = model.external_force();
+      if (extra > 0) {
         Triplets t;
         for (int k = 0; k < rows.outerSize(); ++k)
           for (Eigen::SparseMatrix<double>::InnerIterator it(rows, k); it; ++it)
             t.emplace_back(it.row(), it.col(), it.value());
-        for (int c = 0; c < columns; ++c)
-          for (int i = 0; i < 3; ++i)
-            if (held(i, c) != 0) t.emplace_back(rows.rows() + i, c, held(i, c));
-        grown.setFromTriplets(t.begin(), t.end());
-        rows = std::move(grown);
-        f.conservativeResize(f.size() + 3);
-        f.tail<3>() = seen + press.weight();
+        for (int r = 0; r < extra / 3; ++r) {
+          const auto& [clamp, seen] = ms[m].reactions[r];
+          const ClampReaction press(model, clamp);
+          const Eigen::Matrix3Xd held = reaction_parameter_jacobian(
+              model, term, press, ms[m].x, group, columns, set * groups * nq);
+          for (int c = 0; c < columns; ++c)
+            for (int i = 0; i < 3; ++i)
+              if (held(i, c) != 0) t.emplace_back(n + 3 * r + i, c, held(i, c));
+          f.segment<3>(n + 3 * r) = seen + press.weight();
+        }
+        rows.resize(n + extra, columns);
+        rows.setFromTriplets(t.begin(), t.end());
       }
       n_rows += static_cast<int>(rows.rows());
       blocks.push_back(std::move(rows));

@@ -290,31 +290,25 @@ TEST(PressedProbe, BadPressEntriesAreNamedWithTheirPlace) {
     }
     return std::string("no error");
   };
-  const std::string reaction = ", reaction: [0, 0, -1]";
-  EXPECT_NE(error_of(pressed_block(kTruth, press_entry("p", kCentre, {0, 0, -1e-3}, reaction)))
-                .find("probing.measurements[0].press[0].reaction: a measured reaction needs "
-                      "probing.noise"),
-            std::string::npos);
-  EXPECT_NE(error_of(pressed_block(kTruth,
-                                   "    - { name: p, press: [{ select: { plane: { axis: z, at: 0 } "
-                                   "}, displacement: [0, 0, 1.0e-3] }] }\n"))
-                .find("probing.measurements[0].press[0].select: node 0 is held by clamp 'table'"),
-            std::string::npos);
-  EXPECT_NE(error_of(pressed_block(
-                         kTruth, "    - { name: p, press: [{ select: { box: " + kCentre +
-                                     " }, displacement: [0, 0, -1.0e-3] }], loads: [{ name: push, "
-                                     "select: { plane: { axis: z, at: 0.02 } }, force: [1, 0, 0] "
-                                     "}] }\n"))
-                .find("probing.measurements[0].press[0].select: node"),
-            std::string::npos);
-  EXPECT_NE(error_of(pressed_block(kTruth, "    - { name: p }\n"))
-                .find("probing.measurements[0]: give the probe as 'loads' (a force) or 'press'"),
-            std::string::npos);
-  EXPECT_NE(error_of(pressed_block(kTruth,
-                                   "    - { name: p, press: [{ select: { plane: { axis: "
-                                   "z, at: 0.02 } } }] }\n"))
-                .find("probing.measurements[0].press[0].displacement: missing required key"),
-            std::string::npos);
+  auto expect_refused = [&](const std::string& measurements, const std::string& message) {
+    const std::string error = error_of(pressed_block(kTruth, measurements));
+    EXPECT_NE(error.find(message), std::string::npos) << error;
+  };
+  expect_refused(press_entry("p", kCentre, {0, 0, -1e-3}, ", reaction: [0, 0, -1]"),
+                 "probing.measurements[0].press[0].reaction: a measured reaction needs "
+                 "probing.noise");
+  expect_refused(
+      "    - { name: p, press: [{ select: { plane: { axis: z, at: 0 } }, displacement: "
+      "[0, 0, 1.0e-3] }] }\n",
+      "probing.measurements[0].press[0].select: node 0 is held by clamp 'table'");
+  expect_refused("    - { name: p, press: [{ select: { box: " + kCentre +
+                     " }, displacement: [0, 0, -1.0e-3] }], loads: [{ name: push, select: { "
+                     "plane: { axis: z, at: 0.02 } }, force: [1, 0, 0] }] }\n",
+                 "probing.measurements[0].press[0].select: node");
+  expect_refused("    - { name: p }\n",
+                 "probing.measurements[0]: give the probe as 'loads' (a force) or 'press'");
+  expect_refused("    - { name: p, press: [{ select: { plane: { axis: z, at: 0.02 } } }] }\n",
+                 "probing.measurements[0].press[0].displacement: missing required key");
 }
 
 TEST(PressedProbe, TheBundledExampleReadsItsPressesAndForces) {
