@@ -9,7 +9,8 @@
 // Segments: the forward pass stores one state per segment boundary (in a temporary
 // file, see BoundaryStates); each segment is then re-integrated from its start,
 // storing the Hermite points of all its steps, and solved backward, λ being
-// continuous across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺)).
+// continuous across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺))
+// except at a shape target's time, where Φ_k(x(T_k)) makes λx jump by ∂Φ_k/∂x.
 // Segments take the place of IDAS's own checkpoints within a run (see below); their
 // length is fixed per experiment (Experiment::segment_length).
 // The forward model restarts at the same boundaries in every pass, so the gradient
@@ -426,8 +427,11 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
     if (segments == 1) run.ex.note_steps(integ->stats().steps);
     if (k == segments - 1) {
       run.add_quadratures(*integ, result);
-      run.set_adjoint_scale(result.phi_per_marker);
+      run.add_targets(T[k + 1], integ->positions(), result);
+      run.set_adjoint_scale(result);
     }
+    // A target at T[k+1] (a fixed time, so a boundary): λx(T⁻) = λx(T⁺) + ∂Φ_k/∂x.
+    run.add_target_gradient(T[k + 1], integ->positions(), lambda.data());
     if (!backward_segment(run, *integ, T[k], T[k + 1], lambda, dphi_dp, seen, result)) return;
   }
   // The peaks are kept while they predict λ within kLooseTolerance, so that
@@ -437,6 +441,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       off(seen.v, run.lambda_v_ref))
     run.ex.note_adjoint_peaks({seen.x / run.misfit_rms, seen.v / run.misfit_rms});
 
+  run.add_target_gradient(T[0], run.x0, lambda.data());
   if (run.static_initial()) {
     // + λx(t₀)ᵀ x₀_q = −μᵀ ∂R/∂q at the static state, K₀ᵀ μ = λx(t₀).
     run.factor_static_stiffness();

@@ -32,11 +32,14 @@ const char* to_string(GradientMethod m) {
 
 namespace {
 MarkerObjective make_objective(const Scenario& s, const ObjectiveSpec& spec) {
-  if (s.markers.observed_path.empty())
-    throw Error(
-        fmt::format("{}: markers.observed: the scenario has no captured tracks to fit", s.path));
+  const bool targets = !spec.targets.empty();
+  if (s.markers.observed_path.empty() && !targets)
+    throw Error(fmt::format(
+        "{}: markers.observed: the scenario has no captured tracks to fit (nor shape targets, "
+        "fit.objective.targets)",
+        s.path));
   try {
-    return MarkerObjective(s.markers.embedded, s.markers.observed, spec, s.time.end);
+    return MarkerObjective(s.markers.embedded, s.markers.observed, spec, s.time.end, targets);
   } catch (const Error& e) {
     throw Error(fmt::format("{}: {}", s.path, e.what()));
   }
@@ -46,7 +49,21 @@ MarkerObjective make_objective(const Scenario& s, const ObjectiveSpec& spec) {
 Experiment::Experiment(const Scenario& scenario, const ObjectiveSpec& objective)
     : scenario_(scenario),
       model_(build_model(scenario)),
-      objective_(make_objective(scenario, objective)) {}
+      objective_(make_objective(scenario, objective)) {
+  for (const ShapeTargetSpec& t : objective.targets) targets_.emplace_back(t, scenario.mesh);
+}
+
+double Experiment::objective_weight() const {
+  double w = 0;
+  for (int i = 0; i < objective_.num_markers(); ++i) w += objective_.weighted_observed_time(i);
+  for (const ShapeTarget& t : targets_) w += t.weight() * t.coordinates();
+  return w;
+}
+
+double Experiment::rms(const Eigen::VectorXd& phi_per_marker,
+                       const Eigen::VectorXd& phi_targets) const {
+  return std::sqrt(2 * (phi_per_marker.sum() + phi_targets.sum()) / objective_weight());
+}
 
 void Experiment::apply(const ParameterMap& map, const Eigen::VectorXd& p) {
   map.apply(p, *model_);
@@ -79,9 +96,9 @@ ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::Vect
     result.ok = false;
     result.error = e.what();
   }
-  if (result.phi_per_marker.size()) {
-    result.phi = result.phi_per_marker.sum();
-    result.rms = objective_.rms(result.phi_per_marker);
+  if (result.phi_per_marker.size() || result.phi_targets.size()) {
+    result.phi = result.phi_per_marker.sum() + result.phi_targets.sum();
+    result.rms = rms(result.phi_per_marker, result.phi_targets);
   }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
@@ -137,14 +154,63 @@ bool Experiment::plan_segments(long steps, long budget, double duration, double 
   return true;
 }
 
-std::vector<double> ExperimentRun::boundaries() const {
-  std::vector<double> b{t0};
-  if (const double length = ex.segment_length(opt.segment); length > 0) {
-    const int segments = std::max(1, static_cast<int>(std::ceil((t_end - t0) / length - 1e-9)));
-    for (int k = 1; k < segments; ++k) b.push_back(t0 + k * length);
-  }
-  b.push_back(t_end);
+namespace {
+/// Times closer than this fraction of the run are one time.
+constexpr double kSameTime = 1e-9;
+}  // namespace
+
+std::vector<double> ExperimentRun::fixed_times() const {
+  const double eps = kSameTime * (t_end - t0);
+  std::vector<double> b{t0, t_end};
+  for (const ShapeTarget& target : ex.targets())
+    if (target.time() > t0 + eps && target.time() < t_end - eps) b.push_back(target.time());
+  std::sort(b.begin(), b.end());
+  b.erase(std::unique(b.begin(), b.end(), [eps](double a, double c) { return c - a <= eps; }),
+          b.end());
   return b;
+}
+
+std::vector<double> ExperimentRun::boundaries() const {
+  std::vector<double> b = fixed_times();
+  if (const double length = ex.segment_length(opt.segment); length > 0) {
+    const std::vector<double> fixed = b;
+    const int segments = std::max(1, static_cast<int>(std::ceil((t_end - t0) / length - 1e-9)));
+    for (int k = 1; k < segments; ++k) {
+      const double t = t0 + k * length;
+      // A sliver of a segment next to a target time would only cost a restart.
+      if (std::none_of(fixed.begin(), fixed.end(),
+                       [&](double f) { return std::abs(f - t) < 0.01 * length; }))
+        b.push_back(t);
+    }
+    std::sort(b.begin(), b.end());
+  }
+  return b;
+}
+
+void ExperimentRun::add_targets(double t, const Eigen::VectorXd& x_free, ExperimentResult& result) {
+  const auto& targets = ex.targets();
+  if (targets.empty()) return;
+  if (result.phi_targets.size() != static_cast<Eigen::Index>(targets.size()))
+    result.phi_targets.setZero(static_cast<Eigen::Index>(targets.size()));
+  Eigen::Matrix3Xd xs, vs;
+  bool expanded = false;
+  for (size_t k = 0; k < targets.size(); ++k) {
+    if (std::abs(targets[k].time() - t) > kSameTime * (t_end - t0)) continue;
+    if (!expanded) model.expand(t, x_free.data(), nullptr, xs, vs);
+    expanded = true;
+    result.phi_targets[static_cast<Eigen::Index>(k)] += targets[k].value(xs);
+  }
+}
+
+void ExperimentRun::add_target_gradient(double t, const Eigen::VectorXd& x_free, double* gradient) {
+  Eigen::Matrix3Xd xs, vs;
+  bool expanded = false;
+  for (const ShapeTarget& target : ex.targets()) {
+    if (std::abs(target.time() - t) > kSameTime * (t_end - t0)) continue;
+    if (!expanded) model.expand(t, x_free.data(), nullptr, xs, vs);
+    expanded = true;
+    target.add_gradient(model, xs, gradient);
+  }
 }
 
 long ExperimentRun::checkpoint_budget() const {
@@ -156,6 +222,7 @@ bool ExperimentRun::integrate_segments(
     const std::function<void(int, IdasIntegrator&)>& segment_done) {
   Eigen::VectorXd xk = x0, vk = v0;
   double first_step = 0;
+  add_targets(T[0], x0, result);
   for (int k = 0; k < count; ++k) {
     auto integ = start(T[k], xk, vk, first_step);
     const bool ok = advance(*integ, T[k + 1], result);
@@ -165,6 +232,7 @@ bool ExperimentRun::integrate_segments(
     // interpolate the quadratures" instead of what stopped it.
     if (!ok) return false;
     add_quadratures(*integ, result);
+    add_targets(T[k + 1], integ->positions(), result);
     xk = integ->positions();
     vk = integ->velocities();
     first_step = integ->restart_step();
@@ -194,6 +262,7 @@ std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::Vect
   // 1 mm residual whose marker is off by the position tolerance.
   const double atol = 1e-3 * iopt.atol * (t_end - t0);
   const int nm = objective.num_markers();
+  if (nm + observation_count == 0) return integ;  // shape targets alone
   integ->add_quadrature(
       nm + observation_count,
       [this, nm](double tt, const double* y, const double*, double* g) {
@@ -207,9 +276,10 @@ std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::Vect
 }
 
 void ExperimentRun::add_quadratures(const IdasIntegrator& integ, ExperimentResult& result) const {
-  const Eigen::VectorXd q = integ.quadrature();
   const int nm = objective.num_markers();
   if (result.phi_per_marker.size() != nm) result.phi_per_marker.setZero(nm);
+  if (nm + observation_count == 0) return;
+  const Eigen::VectorXd q = integ.quadrature();
   result.phi_per_marker += q.head(nm);
   if (observation_count == 0) return;
   if (result.dphi_dtheta.size() != observation_count) result.dphi_dtheta.setZero(observation_count);
@@ -308,9 +378,9 @@ void ExperimentRun::factor_static_stiffness() {
   a.setZero(3, xs.cols());
 }
 
-void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
+void ExperimentRun::set_adjoint_scale(const ExperimentResult& result) {
   const double duration = t_end - t0;
-  misfit_rms = std::max(objective.rms(phi_per_marker), iopt.atol);
+  misfit_rms = std::max(ex.rms(result.phi_per_marker, result.phi_targets), iopt.atol);
   const Experiment::AdjointPeaks& peaks = ex.adjoint_peaks();
   if (peaks.x > 0 && peaks.v > 0) {
     lambda_x_ref = peaks.x * misfit_rms;
@@ -321,13 +391,18 @@ void ExperimentRun::set_adjoint_scale(const Eigen::VectorXd& phi_per_marker) {
   for (int e = 0; e < model.mesh().num_tets(); ++e)
     mass += model.density()[e] * model.elements()[e].volume;
   const double node_mass = mass / model.mesh().num_nodes();
-  lambda_x_ref = misfit_rms * duration;
+  // A target adds a jump of w_k · its residual to λx.
+  double jumps = 0;
+  for (Eigen::Index k = 0; k < result.phi_targets.size(); ++k)
+    jumps += ex.targets()[k].weight() * ex.targets()[k].rms(result.phi_targets[k]);
+  lambda_x_ref = misfit_rms * duration + jumps;
   lambda_v_ref = lambda_x_ref * duration / std::max(node_mass, 1e-300);
 }
 
 bool ExperimentRun::plan_segments(ExperimentResult& plain) {
   plain.phi_per_marker.setZero(objective.num_markers());
-  if (!integrate_segments({t0, t_end}, 1, plain)) return false;
+  const std::vector<double> T = fixed_times();
+  if (!integrate_segments(T, static_cast<int>(T.size()) - 1, plain)) return false;
   ex.plan_segments(plain.forward_stats.steps, checkpoint_budget(), t_end - t0, opt.tolerance_scale);
   plain.ok = true;
   return true;
@@ -337,7 +412,7 @@ void evaluate_objective(ExperimentRun& run, ExperimentResult& result) {
   if (run.planning()) {
     // A failed planning run, or a plan of one segment: that run is the answer.
     ExperimentResult plain;
-    if (!run.plan_segments(plain) || run.boundaries().size() == 2) {
+    if (!run.plan_segments(plain) || run.boundaries() == run.fixed_times()) {
       result = plain;
       return;
     }

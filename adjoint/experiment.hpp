@@ -12,6 +12,7 @@
 
 #include "adjoint/marker_objective.hpp"
 #include "adjoint/parameter_map.hpp"
+#include "adjoint/shape_target.hpp"
 #include "engine/fem_model.hpp"
 #include "engine/idas_integrator.hpp"
 #include "engine/order_policy.hpp"
@@ -61,7 +62,8 @@ struct ExperimentResult {
   double t_reached = 0;
   double t_furthest = 0;  // latest time any pass reached: the progress the step limit is paced by
   Eigen::VectorXd phi_per_marker;  // Φᵢ
-  double phi = 0, rms = 0;         // Σ Φᵢ and the RMS distance (m)
+  Eigen::VectorXd phi_targets;     // Φ_k of each shape target (Experiment::targets())
+  double phi = 0, rms = 0;         // Σ Φᵢ + Σ Φ_k and the RMS distance (m) over both
   Eigen::VectorXd gradient;        // dΦ/dp (empty without a gradient)
   Eigen::VectorXd dphi_dtheta;     // ∫ ∂g/∂θ dt over the observation vector, with a gradient
   IntegratorStats forward_stats, backward_stats;
@@ -72,7 +74,8 @@ struct ExperimentResult {
 
 class Experiment {
  public:
-  /// The scenario must outlive the experiment and have observed marker tracks.
+  /// The scenario must outlive the experiment and have observed marker tracks or
+  /// shape targets (objective.targets, which belong to this experiment's motion).
   Experiment(const Scenario& scenario, const ObjectiveSpec& objective);
   Experiment(Scenario&&, const ObjectiveSpec&) = delete;
 
@@ -81,6 +84,13 @@ class Experiment {
   const FemModel& model() const { return *model_; }
   const MarkerObjective& objective() const { return objective_; }
   MarkerObjective& objective() { return objective_; }
+  const std::vector<ShapeTarget>& targets() const { return targets_; }
+
+  /// What Φ is measured against: Σᵢ wᵢTᵢ over the markers' observed time plus
+  /// Σ_k w_k · coordinates over the targets (m² s of Φ per m² of mean square distance).
+  double objective_weight() const;
+  /// The RMS distance over markers and targets, sqrt(2Φ / objective_weight()).
+  double rms(const Eigen::VectorXd& phi_per_marker, const Eigen::VectorXd& phi_targets) const;
 
   /// Sets the model's material and the objective's observation parameters to p.
   void apply(const ParameterMap& map, const Eigen::VectorXd& p);
@@ -135,6 +145,7 @@ class Experiment {
   const Scenario& scenario_;
   std::unique_ptr<FemModel> model_;
   MarkerObjective objective_;
+  std::vector<ShapeTarget> targets_;
   double segment_ = -1;       // automatic segment length; < 0 until planned
   double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
   long planned_steps_ = 0;

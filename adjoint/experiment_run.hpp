@@ -38,9 +38,18 @@ struct ExperimentRun {
   /// observation_count, ∫ ∂g/∂θ dt.
   void add_quadratures(const IdasIntegrator& integ, ExperimentResult& result) const;
 
-  /// Segment boundaries t0 = T₀ < … < T_S = t_end (one segment while the
-  /// experiment's automatic plan is open: that run then decides it).
+  /// Times every pass restarts at: t₀, the shape targets' times inside the run, and
+  /// t_end. The adjoint's λx jumps at a target time, and a forward pass that ends a
+  /// segment there reads the state without interpolation.
+  std::vector<double> fixed_times() const;
+  /// Segment boundaries t0 = T₀ < … < T_S = t_end: the fixed times and, once the
+  /// experiment's automatic plan is made, its equal segments (a boundary close to a
+  /// fixed time is left out).
   std::vector<double> boundaries() const;
+  /// Φ_k of the shape targets at time t, added to result.phi_targets, from the free
+  /// positions at t; with `gradient`, their ∂Φ/∂x (free dofs) is added there instead.
+  void add_targets(double t, const Eigen::VectorXd& x_free, ExperimentResult& result);
+  void add_target_gradient(double t, const Eigen::VectorXd& x_free, double* gradient);
   /// Most steps one segment's Hermite points may hold (GradientOptions::checkpoint_steps).
   long checkpoint_budget() const;
   /// True when this evaluation decides the experiment's automatic segment plan.
@@ -64,7 +73,8 @@ struct ExperimentRun {
   /// `error_control`: see IdasIntegrator::add_sensitivities.
   Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ, bool error_control);
   /// Integrates segments 0 … count−1 of T from (x₀, v₀), each restarted with the
-  /// first step its predecessor proposed, and adds their Φ and steps to `result`;
+  /// first step its predecessor proposed, and adds their Φ (the targets at t₀ and at
+  /// the segments' ends included) and steps to `result`;
   /// `segment_done(k, integ)` sees every finished segment. False on failure.
   bool integrate_segments(const std::vector<double>& T, int count, ExperimentResult& result,
                           const std::function<void(int, IdasIntegrator&)>& segment_done = {});
@@ -93,7 +103,7 @@ struct ExperimentRun {
   /// the λ it meets and corrects (backward_segment).
   double lambda_x_ref = 0, lambda_v_ref = 0, misfit_rms = 0;
   bool lambda_refs_missed = false;  // a backward pass was solved again with smaller ones
-  void set_adjoint_scale(const Eigen::VectorXd& phi_per_marker);
+  void set_adjoint_scale(const ExperimentResult& result);
 
   /// Sensitivity of a static initial state, x₀_p = −K₀⁻¹ ∂R/∂p (zero from rest).
   bool static_initial() const { return ex.scenario().static_initial; }

@@ -33,7 +33,8 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
   // A scenario of static measurements alone is fitted to them; one with captured
   // tracks too to both.
   const bool probed = has_probing(scenario);
-  if (!probed || !scenario.markers.observed.names.empty())
+  if (!probed || !scenario.markers.observed.names.empty() ||
+      !scenario.fit.objective.targets.empty())
     experiments_.push_back(std::make_unique<Experiment>(scenario, scenario.fit.objective));
   if (probed) add_static_terms(scenario);
   const auto dir = std::filesystem::path(scenario.path).parent_path();
@@ -49,9 +50,13 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
           scenario.mesh.num_tets()));
     // A probing scenario adds its static measurements, and its captured motion when it
     // has one too.
+    // The marker weights and window are the fit's; shape targets belong to the
+    // motion whose file states them.
+    ObjectiveSpec objective = scenario.fit.objective;
+    objective.targets = other.fit.objective.targets;
     const bool probing = has_probing(other);
-    if (!probing || !other.markers.observed.names.empty())
-      experiments_.push_back(std::make_unique<Experiment>(other, scenario.fit.objective));
+    if (!probing || !other.markers.observed.names.empty() || !objective.targets.empty())
+      experiments_.push_back(std::make_unique<Experiment>(other, objective));
     if (probing) add_static_terms(other);
   }
   if (experiments_.empty() && statics_.empty())
@@ -169,8 +174,7 @@ Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions&
                      : fmt::format("{}: {}", ex->scenario().path, r.error);
     }
     ev.phi += r.phi;
-    for (int i = 0; i < ex->objective().num_markers(); ++i)
-      weighted_time += ex->objective().weighted_observed_time(i);
+    weighted_time += ex->objective_weight();
     if (r.ok && r.gradient.size()) ev.gradient += r.gradient;
     ev.experiments.push_back(std::move(r));
   }

@@ -4,6 +4,7 @@
 // per parameter per step: the cost grows with the number of parameters, which is
 // what the adjoint avoids.
 #include <cstring>
+#include <functional>
 
 #include "adjoint/experiment_run.hpp"
 #include "engine/error.hpp"
@@ -112,8 +113,8 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
   auto integ = run.start(run.t0, run.x0, run.v0);
   // A gradient for the line search: its accuracy is worth the extra steps.
   const std::vector<int> entries = run.map.model_entries();
-  run.add_sensitivities(*integ, true);
-  if (!entries.empty())
+  const Eigen::MatrixXd yS0 = run.add_sensitivities(*integ, true);
+  if (!entries.empty() && run.objective.num_markers() + run.observation_count > 0)
     integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,
                                                   const double* const* yS, double* const* qS) {
       Eigen::Matrix3Xd x, v;
@@ -129,16 +130,34 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
       return true;
     });
 
-  const bool ok = run.advance(*integ, run.t_end, result);
+  result.gradient = Eigen::VectorXd::Zero(run.map.size());
+  // A shape target adds ∂Φ_k/∂x · s_x at its time; IDAS stops there (fixed_times).
+  const auto add_target_terms = [&](double t, const Eigen::VectorXd& x_free,
+                                    const std::function<Eigen::MatrixXd()>& sensitivities) {
+    run.add_targets(t, x_free, result);
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(n);
+    run.add_target_gradient(t, x_free, g.data());
+    if (entries.empty() || g.isZero(0)) return;
+    const Eigen::MatrixXd s = sensitivities();
+    for (size_t j = 0; j < entries.size(); ++j)
+      result.gradient[entries[j]] += g.dot(s.col(static_cast<long>(j)).head(n));
+  };
+  add_target_terms(run.t0, run.x0, [&] { return yS0; });
+  const std::vector<double> T = run.fixed_times();
+  for (size_t k = 1; k < T.size(); ++k) {
+    if (!run.advance(*integ, T[k], result)) {
+      result.forward_stats = integ->stats();
+      return;  // the quadrature is unreadable after a failure (integrate_segments)
+    }
+    add_target_terms(T[k], integ->positions(), [&] { return integ->state_sensitivities(); });
+  }
   result.forward_stats = integ->stats();
-  if (!ok) return;  // the quadrature is unreadable after a failure (integrate_segments)
   run.add_quadratures(*integ, result);
   // Component 0 carries the sum over markers (above); observation entries have no
   // state sensitivity: their gradient is the objective's own.
-  result.gradient = Eigen::VectorXd::Zero(run.map.size());
-  if (!entries.empty()) {
+  if (!entries.empty() && run.objective.num_markers() + run.observation_count > 0) {
     const Eigen::MatrixXd qS = integ->quadrature_sensitivities();
-    for (size_t j = 0; j < entries.size(); ++j) result.gradient[entries[j]] = qS(0, j);
+    for (size_t j = 0; j < entries.size(); ++j) result.gradient[entries[j]] += qS(0, j);
   }
   if (run.observation_count > 0)
     run.map.add_observation_gradient(result.dphi_dtheta, result.gradient);

@@ -12,7 +12,7 @@ namespace kelvin {
 
 MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
                                  const MarkerTracks& observed, const ObjectiveSpec& spec,
-                                 double t_end)
+                                 double t_end, bool may_be_empty)
     : times_(observed.times),
       t0_(spec.window_begin),
       t1_(spec.window_end < 0 ? t_end : std::min(spec.window_end, t_end)) {
@@ -83,7 +83,7 @@ MarkerObjective::MarkerObjective(const std::vector<MarkerEmbedding>& markers,
     }
   double total = 0;
   for (double t : weighted_time_) total += t;
-  if (total <= 0)
+  if (total <= 0 && !may_be_empty)
     throw Error(fmt::format(
         "no marker is observed in two consecutive frames inside the objective window [{:g}, "
         "{:g}] s",

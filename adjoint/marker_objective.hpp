@@ -38,9 +38,10 @@ struct ObservationParams {
 class MarkerObjective {
  public:
   /// Markers without an observed track are ignored. Throws kelvin::Error when no
-  /// marker is observed inside the window.
+  /// marker is observed inside the window, unless `may_be_empty` (an objective of
+  /// shape targets alone).
   MarkerObjective(const std::vector<MarkerEmbedding>& markers, const MarkerTracks& observed,
-                  const ObjectiveSpec& spec, double t_end);
+                  const ObjectiveSpec& spec, double t_end, bool may_be_empty = false);
 
   int num_markers() const { return static_cast<int>(names_.size()); }
   const std::vector<std::string>& names() const { return names_; }

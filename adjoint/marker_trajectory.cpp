@@ -1,12 +1,8 @@
 #include "adjoint/marker_trajectory.hpp"
 
 #include <fmt/format.h>
-#include <idas/idas.h>
-#include <nvector/nvector_serial.h>
 
 #include <cmath>
-#include <memory>
-#include <type_traits>
 
 #include "adjoint/experiment_run.hpp"
 #include "engine/error.hpp"
@@ -14,11 +10,6 @@
 
 namespace kelvin {
 namespace {
-
-struct VectorDeleter {
-  void operator()(N_Vector v) const { N_VDestroy(v); }
-};
-using Vector = std::unique_ptr<std::remove_pointer_t<N_Vector>, VectorDeleter>;
 
 /// dr/dp ((3·objective markers) × np) from position sensitivities over the free
 /// dofs (n × np): clamped nodes follow a prescribed motion and contribute nothing;
@@ -82,7 +73,6 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
     if (with_sensitivities) yS0 = run.add_sensitivities(*integ, false);
     const int n = run.n, np = map.size();
     const std::vector<int> entries = map.model_entries();
-    Vector sensitivity(N_VNew_Serial(2 * n, static_cast<SUNContext>(integ->sundials_context())));
     Eigen::MatrixXd sx = Eigen::MatrixXd::Zero(n, np);
     Eigen::Matrix3Xd x, v;
     ExperimentResult progress;
@@ -103,17 +93,10 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
                        : Eigen::Vector3d::Constant(NAN);
       out.residuals.push_back(r);
       if (!with_sensitivities) continue;
-      for (size_t j = 0; j < entries.size(); ++j) {
-        // Before the first step IDAS has no interpolant to ask.
-        if (t == run.t0) {
-          sx.col(entries[j]) = yS0.col(static_cast<long>(j)).head(n);
-          continue;
-        }
-        if (IDAGetSensDky1(integ->idas_memory(), t, 0, static_cast<int>(j), sensitivity.get()) < 0)
-          throw Error(fmt::format("could not interpolate the sensitivities at t = {:.6g} s", t));
-        sx.col(entries[j]) =
-            Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(sensitivity.get()), n);
-      }
+      // Before the first step IDAS has no interpolant to ask.
+      const Eigen::MatrixXd s = t == run.t0 ? yS0 : integ->state_sensitivities();
+      for (size_t j = 0; j < entries.size(); ++j)
+        sx.col(entries[j]) = s.col(static_cast<long>(j)).head(n);
       out.residual_sensitivities.push_back(residual_sensitivities(model, objective, map, t, x, sx));
     }
     out.stats = integ->stats();

@@ -42,6 +42,15 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
   const ParameterMap& map = problem.map();
   std::vector<double> residual;
   std::vector<Eigen::RowVectorXd> rows;
+  for (int e = 0; e < problem.num_experiments(); ++e)
+    if (!problem.experiment(e).targets().empty()) {
+      g.error = fmt::format(
+          "{}: fit.objective.targets: a shape target is a goal, not a measurement with noise; "
+          "standard errors and Gauss–Newton steps are computed for fits to captured markers and "
+          "static measurements only",
+          problem.experiment(e).scenario().path);
+      return g;
+    }
   for (int e = 0; e < problem.num_experiments(); ++e) {
     Experiment& ex = problem.experiment(e);
     const Scenario& s = ex.scenario();

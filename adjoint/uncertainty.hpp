@@ -49,7 +49,7 @@ struct ResidualSample {
 /// forward-sensitivity solve per experiment (observation entries from the
 /// objective's own derivatives); then every static measurement's coordinates,
 /// weighted as Φ weighs them against the first motion's frames, with J from the
-/// linearised equilibrium.
+/// linearised equilibrium. Refused (error) for experiments with shape targets.
 struct GaussNewtonSystem {
   bool ok = false;
   std::string error;

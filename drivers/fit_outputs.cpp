@@ -29,23 +29,30 @@ Eigen::VectorXd model_values(const ParameterMap& map, const Eigen::VectorXd& p) 
   return q;
 }
 
-/// Per-marker RMS of every experiment at p, in experiment/marker order.
-std::vector<double> marker_rms(FitProblem& problem, const Eigen::VectorXd& p,
-                               const std::atomic<bool>* interrupt, double* overall) {
+/// RMS distances at p: overall, per marker and per shape target of every
+/// experiment (experiment order, then the objective's), NaN where a run failed.
+struct RmsAt {
+  double overall = 0;
+  std::vector<double> markers, targets;
+};
+
+RmsAt rms_at(FitProblem& problem, const Eigen::VectorXd& p, const std::atomic<bool>* interrupt) {
   GradientOptions o;
   o.method = GradientMethod::kNone;
   o.interrupt = interrupt;
   const Evaluation ev = problem.evaluate(p, o);
-  std::vector<double> out;
+  constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+  RmsAt out;
   for (int k = 0; k < problem.num_experiments(); ++k) {
-    const auto& objective = problem.experiment(k).objective();
-    const Eigen::VectorXd rms =
-        ev.experiments[k].ok ? objective.marker_rms(ev.experiments[k].phi_per_marker)
-                             : Eigen::VectorXd::Constant(objective.num_markers(),
-                                                         std::numeric_limits<double>::quiet_NaN());
-    out.insert(out.end(), rms.data(), rms.data() + rms.size());
+    const Experiment& ex = problem.experiment(k);
+    const ExperimentResult& r = ev.experiments[k];
+    const Eigen::VectorXd rms = r.ok ? ex.objective().marker_rms(r.phi_per_marker)
+                                     : Eigen::VectorXd::Constant(ex.objective().num_markers(), nan);
+    out.markers.insert(out.markers.end(), rms.data(), rms.data() + rms.size());
+    for (size_t t = 0; t < ex.targets().size(); ++t)
+      out.targets.push_back(r.ok ? ex.targets()[t].rms(r.phi_targets[static_cast<long>(t)]) : nan);
   }
-  *overall = ev.ok ? ev.rms : std::numeric_limits<double>::quiet_NaN();
+  out.overall = ev.ok ? ev.rms : nan;
   return out;
 }
 
@@ -167,18 +174,29 @@ std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
 
   const bool stopped = s.interrupted || (interrupt && interrupt->load());
   if (!stopped) {
-    const std::vector<double> before = marker_rms(problem, s.start, interrupt, &data.rms_before);
-    const std::vector<double> after = marker_rms(problem, s.best, interrupt, &data.rms_after);
+    const RmsAt before = rms_at(problem, s.start, interrupt);
+    const RmsAt after = rms_at(problem, s.best, interrupt);
+    data.rms_before = before.overall;
+    data.rms_after = after.overall;
     std::vector<std::pair<int, std::string>> where;  // (experiment, marker) per row
-    for (int k = 0; k < problem.num_experiments(); ++k)
-      for (const auto& name : problem.experiment(k).objective().names()) {
-        data.markers.push_back({problem.experiment(k).scenario().name, name, before[where.size()],
-                                after[where.size()]});
+    for (int k = 0; k < problem.num_experiments(); ++k) {
+      const Experiment& ex = problem.experiment(k);
+      for (const auto& name : ex.objective().names()) {
+        data.markers.push_back(
+            {ex.scenario().name, name, before.markers[where.size()], after.markers[where.size()]});
         where.emplace_back(k, name);
       }
-    write_marker_rms_csv((std::filesystem::path(s.outdir) / "marker-rms.csv").string(),
-                         data.markers);
-    data.files.push_back("marker-rms.csv");
+      for (const ShapeTarget& t : ex.targets()) {
+        const size_t i = data.targets.size();
+        data.targets.push_back({ex.scenario().name, t.name(), t.time(), t.coordinates(),
+                                before.targets[i], after.targets[i]});
+      }
+    }
+    if (!data.markers.empty()) {
+      write_marker_rms_csv((std::filesystem::path(s.outdir) / "marker-rms.csv").string(),
+                           data.markers);
+      data.files.push_back("marker-rms.csv");
+    }
 
     std::vector<int> order(data.markers.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);

@@ -84,7 +84,7 @@ double median(std::vector<double> v) {
 }
 
 bool rms_known(const FitReportData& d) {
-  return !d.markers.empty() || d.rms_before > 0 || d.rms_after > 0;
+  return !d.markers.empty() || !d.targets.empty() || d.rms_before > 0 || d.rms_after > 0;
 }
 
 // ---------------------------------------------------------------- report.md sections
@@ -93,8 +93,11 @@ std::string summary_section(const FitReportData& d) {
   std::string out = fmt::format("# Fit report: {}\n\n", d.title);
   if (!d.scenario_path.empty()) emit(out, "Scenario: `{}`\n\n", d.scenario_path);
   if (rms_known(d))
-    emit(out, "**Marker RMS {} mm → {} mm** ({}) · ", mm(d.rms_before), mm(d.rms_after),
-         percent_change(d.rms_before, d.rms_after));
+    emit(out, "**{} RMS {} mm → {} mm** ({}) · ",
+         d.targets.empty()   ? "Marker"
+         : d.markers.empty() ? "Shape-target"
+                             : "Marker and target",
+         mm(d.rms_before), mm(d.rms_after), percent_change(d.rms_before, d.rms_after));
   else
     out += "**Marker RMS not evaluated** · ";
   emit(out, "{} evaluations, {} failed · {} · {}", d.evaluations, d.failures, duration(d.seconds),
@@ -207,6 +210,20 @@ std::string marker_section(const FitReportData& d) {
   if (shown < sorted.size())
     emit(out, "\n{} more markers not listed, each with RMS after ≤ {} mm.\n", sorted.size() - shown,
          mm(sorted[shown].after));
+  return out + "\n";
+}
+
+std::string target_section(const FitReportData& d) {
+  if (d.targets.empty()) return "";
+  std::string out =
+      "## Shape targets\n\nRMS distance between the target shape and the simulated one at the "
+      "target's time, over the coordinates that count.\n\n"
+      "| experiment | target | time (s) | coordinates | before (mm) | after (mm) | change "
+      "|\n|---|---|---:|---:|---:|---:|---:|\n";
+  for (const auto& t : d.targets)
+    emit(out, "| {} | {} | {} | {} | {} | {} | {} |\n", cell(t.experiment), cell(t.target),
+         num(t.time, 4), t.coordinates, mm(t.before), mm(t.after),
+         percent_change(t.before, t.after));
   return out + "\n";
 }
 
@@ -356,7 +373,8 @@ std::string write_fit_report(const std::string& outdir, const FitReportData& dat
     written.push_back(name);
   };
 
-  std::string md = summary_section(data) + parameter_section(data) + marker_section(data);
+  std::string md =
+      summary_section(data) + parameter_section(data) + marker_section(data) + target_section(data);
   if (!data.history.empty()) {
     write("objective.svg", svg::render(objective_plot(data.history)));
     md += "## Objective\n\n![objective over evaluations](objective.svg)\n\n";

@@ -27,6 +27,15 @@ struct MarkerRms {
   double before = 0, after = 0;  // m
 };
 
+/// A shape target's RMS distance over its coordinates, with the start and the
+/// fitted parameters.
+struct TargetRms {
+  std::string experiment, target;
+  double time = 0;  // s
+  int coordinates = 0;
+  double before = 0, after = 0;  // m
+};
+
 struct FitReportData {
   std::string title;          // scenario name
   std::string scenario_path;  // the input scenario
@@ -42,6 +51,7 @@ struct FitReportData {
 
   double rms_before = 0, rms_after = 0;  // m, over all experiments
   std::vector<MarkerRms> markers;
+  std::vector<TargetRms> targets;
   std::vector<TrackPlot> tracks;  // what to plot (e.g. the worst and best markers)
   std::vector<FitRecord> history;
   std::vector<LcurvePoint> lcurve;

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <set>
 
 #include "engine/error.hpp"
@@ -102,6 +103,40 @@ MarkerRest read_marker_rest(const std::string& path) {
   if (pos.empty()) throw Error(path + ": no marker rows");
   out.positions.resize(3, pos.size());
   for (size_t i = 0; i < pos.size(); ++i) out.positions.col(i) = pos[i];
+  return out;
+}
+
+NodePositions read_node_positions(const std::string& path, int num_nodes) {
+  NodePositions out;
+  std::vector<Eigen::Vector3d> pos;
+  std::map<int, int> line_of;
+  bool first = true;
+  for (const auto& [n, line] : read_csv_lines(path)) {
+    const auto cells = split_csv_line(line);
+    if (cells.size() != 4)
+      throw Error(
+          fmt::format("{}:{}: expected 4 columns node,x,y,z, found {}", path, n, cells.size()));
+    if (first && is_header_row(cells, 0)) {
+      first = false;
+      continue;
+    }
+    first = false;
+    char* end = nullptr;
+    const long id = std::strtol(cells[0].c_str(), &end, 10);
+    if (cells[0].empty() || *end != '\0' || id < 0 || id >= num_nodes)
+      throw Error(
+          fmt::format("{}:{}: node '{}' is not a node of the mesh (a whole number from 0 to {})",
+                      path, n, cells[0], num_nodes - 1));
+    if (const auto [it, fresh] = line_of.emplace(static_cast<int>(id), n); !fresh)
+      throw Error(
+          fmt::format("{}:{}: node {} appears twice (first on line {})", path, n, id, it->second));
+    out.nodes.push_back(static_cast<int>(id));
+    pos.emplace_back(number(path, n, cells[1], "x"), number(path, n, cells[2], "y"),
+                     number(path, n, cells[3], "z"));
+  }
+  if (pos.empty()) throw Error(path + ": no node rows (expected node,x,y,z)");
+  out.positions.resize(3, static_cast<Eigen::Index>(pos.size()));
+  for (size_t i = 0; i < pos.size(); ++i) out.positions.col(static_cast<Eigen::Index>(i)) = pos[i];
   return out;
 }
 

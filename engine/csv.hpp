@@ -22,6 +22,13 @@ struct MarkerRest {
 /// `name,x,y,z` rows (a header line is allowed).
 MarkerRest read_marker_rest(const std::string& path);
 
+struct NodePositions {
+  std::vector<int> nodes;  // 0-based mesh node ids, each once
+  Eigen::Matrix3Xd positions;
+};
+/// `node,x,y,z` rows (a header line is allowed); `num_nodes` bounds the ids.
+NodePositions read_node_positions(const std::string& path, int num_nodes);
+
 struct MarkerTracks {
   std::vector<std::string> names;  // marker names from the header: <name>_x,_y,_z
   std::vector<double> times;       // strictly increasing

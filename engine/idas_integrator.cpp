@@ -338,6 +338,20 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
   check(IDASetSensErrCon(m.mem, error_control ? SUNTRUE : SUNFALSE), "IDASetSensErrCon");
 }
 
+Eigen::MatrixXd IdasIntegrator::state_sensitivities() const {
+  const Impl& m = *impl_;
+  Eigen::MatrixXd out(2 * m.n, m.ns);
+  if (m.ns == 0) return out;
+  N_Vector* s = N_VCloneVectorArray(m.ns, m.y);
+  const int flag = IDAGetSensDky(m.mem, t_, 0, s);
+  for (int i = 0; i < m.ns; ++i)
+    out.col(i) = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(s[i]), 2 * m.n);
+  N_VDestroyVectorArray(s, m.ns);
+  if (flag < 0)
+    throw Error(fmt::format("could not interpolate the sensitivities at t = {:.6g} s", t_));
+  return out;
+}
+
 void IdasIntegrator::add_quadrature_sensitivities(QuadratureSensitivityRhs rhs) {
   Impl& m = *impl_;
   m.quad_sens_rhs = std::move(rhs);

@@ -75,6 +75,8 @@ class IdasIntegrator {
   void add_sensitivities(SensitivityResidual res, const Eigen::MatrixXd& yS0,
                          const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar,
                          bool error_control);
+  /// State sensitivities dy/dp at time() (2n × ns); needs a step taken.
+  Eigen::MatrixXd state_sensitivities() const;
   void add_quadrature_sensitivities(QuadratureSensitivityRhs rhs);
   /// Quadrature sensitivities at time(): nq × ns.
   Eigen::MatrixXd quadrature_sensitivities() const;

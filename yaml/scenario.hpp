@@ -227,11 +227,32 @@ inline FitParameterSpec linear_fit_parameter(const std::string& target, double l
   return s;
 }
 
-/// The marker misfit Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ − x̄ᵢ‖² dt over a time window.
+/// A shape the body should have at one time (Real2Sim §5, Fig. 10: a face made flat
+/// at t = 0.2 s): Φ gains w/2 Σ (x_{n,a}(t) − x̄_{n,a})² over the selected nodes n and
+/// the axes a that count.
+struct ShapeTargetSpec {
+  std::string name;
+  double time = 0;  // s, within [0, time.end]
+  NodeSelection selection;
+  std::vector<int> nodes;  // the selection resolved, or the nodes of `positions_path`
+  /// Every axis counts, x̄ given per node (positions, a file's rows) or x̄ = X + offset
+  /// (rest positions moved); or only plane_axis counts, x̄ = plane_at (a flat face).
+  std::string positions_path;
+  Eigen::Matrix3Xd positions;  // per entry of nodes when positions_path is set
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+  int plane_axis = -1;  // −1: offset target
+  double plane_at = 0;  // m
+  double weight = 1;    // s: one coordinate weighs like a marker coordinate seen this long
+  int line = 0;         // 1-based line in the scenario file, for messages
+};
+
+/// The objective: the marker misfit Φ = ½ ∫ Σᵢ wᵢ ‖x*ᵢ − x̄ᵢ‖² dt over a time window,
+/// plus the shape targets of this scenario's motion.
 struct ObjectiveSpec {
   std::map<std::string, double> weights;  // marker name → wᵢ (1 when absent; 0 drops it)
   double window_begin = 0;                // s
   double window_end = -1;                 // s; < 0 = the end of the run
+  std::vector<ShapeTargetSpec> targets;
 };
 
 struct FitSpec {

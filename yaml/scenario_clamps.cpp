@@ -176,7 +176,8 @@ std::string unique_name(const Doc& d, const Node& entry, const std::string& P,
   return name;
 }
 
-/// An entry's `select`, parsed and resolved to at least one node of the mesh.
+}  // namespace
+
 void select_entry_nodes(const Doc& d, const Node& entry, const std::string& P, const Mesh& mesh,
                         NodeSelection& selection, std::vector<int>& nodes) {
   const Node sel = d.required(entry, P, "select");
@@ -184,6 +185,8 @@ void select_entry_nodes(const Doc& d, const Node& entry, const std::string& P, c
   nodes = select_nodes(mesh, selection);
   if (nodes.empty()) d.fail(sel, join(P, "select"), explain_empty(selection, mesh));
 }
+
+namespace {
 
 /// A compliant clamp's springs: `compliance` (m³/N) or `stiffness` (N/m³, per area of
 /// the held faces), and an optional `damping_time` (s).

@@ -400,9 +400,78 @@ FitParameterSpec load_parameter(const Doc& d, const Node& n, const std::string& 
   return spec;
 }
 
+/// `fit.objective.targets`: shapes the body should reach at given times.
+std::vector<ShapeTargetSpec> load_targets(const Doc& d, const Node& n, const std::string& P,
+                                          const Scenario& s) {
+  d.require_sequence(n, P);
+  if (n.size() == 0) d.fail(n, P, "the list is empty (leave the key out for no target)");
+  std::vector<ShapeTargetSpec> targets;
+  for (size_t k = 0; k < n.size(); ++k) {
+    const Node e = n[k];
+    const std::string EP = yamlutil::index(P, k);
+    d.require_map(e, EP);
+    d.check_keys(e, EP, {"name", "time", "select", "offset", "plane", "positions", "weight"});
+    ShapeTargetSpec t;
+    t.line = e.Mark().line + 1;
+    t.name = e["name"] ? d.string(e["name"], join(EP, "name")) : fmt::format("target{}", k + 1);
+    for (const auto& other : targets)
+      if (other.name == t.name)
+        d.fail(e["name"] ? e["name"] : e, join(EP, "name"),
+               fmt::format("'{}' is already the name of another target", t.name));
+    const Node time = d.required(e, EP, "time");
+    t.time = d.non_negative(time, join(EP, "time"), "s");
+    if (t.time > s.time.end)
+      d.fail(time, join(EP, "time"),
+             fmt::format("{:g} s is after the end of the run (time.end = {:g} s)", t.time,
+                         s.time.end));
+    const Node offset = e["offset"], plane = e["plane"], positions = e["positions"];
+    if (positions) {
+      // The file names the nodes and where each should be.
+      for (const char* key : {"select", "offset", "plane"})
+        if (e[key])
+          d.fail(e[key], join(EP, key),
+                 "a target given by 'positions' (node,x,y,z rows) names its nodes and their "
+                 "places itself; leave out 'select', 'offset' and 'plane'");
+      t.positions_path = d.existing_file(positions, join(EP, "positions"));
+      try {
+        NodePositions rows = read_node_positions(t.positions_path, s.mesh.num_nodes());
+        t.nodes = std::move(rows.nodes);
+        t.positions = std::move(rows.positions);
+      } catch (const Error& err) {
+        d.fail(positions, join(EP, "positions"), err.what());
+      }
+    } else {
+      select_entry_nodes(d, e, EP, s.mesh, t.selection, t.nodes);
+    }
+    if (offset && plane)
+      d.fail(plane, join(EP, "plane"),
+             "give 'offset' (every axis: the rest positions moved) or 'plane' (one axis: a flat "
+             "face), not both");
+    if (offset) {
+      t.offset = d.vec3(offset, join(EP, "offset"));
+    } else if (plane) {
+      const std::string PP = join(EP, "plane");
+      d.require_map(plane, PP);
+      d.check_keys(plane, PP, {"axis", "at"});
+      t.plane_axis =
+          d.choice(d.required(plane, PP, "axis"), join(PP, "axis"), {"x", "y", "z"})[0] - 'x';
+      t.plane_at = d.number(d.required(plane, PP, "at"), join(PP, "at"));
+    } else if (!positions) {
+      d.fail(e, EP,
+             "says no target shape: give 'offset: [dx, dy, dz]' (m, from the rest positions), "
+             "'plane: {axis, at}' (the selected nodes on that plane) or 'positions: file.csv' "
+             "(node,x,y,z rows)");
+    }
+    if (const Node w = e["weight"]) t.weight = d.positive(w, join(EP, "weight"), "s");
+    targets.push_back(std::move(t));
+  }
+  return targets;
+}
+
 void load_objective(const Doc& d, const Node& n, const Scenario& s, ObjectiveSpec& obj) {
   const std::string P = "fit.objective";
-  d.check_keys(n, P, {"weights", "window"});
+  d.check_keys(n, P, {"weights", "window", "targets"});
+  if (const Node t = n["targets"]) obj.targets = load_targets(d, t, join(P, "targets"), s);
   if (const Node w = n["weights"]) {
     const std::string WP = join(P, "weights");
     d.require_map(w, WP);

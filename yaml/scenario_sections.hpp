@@ -22,6 +22,9 @@ std::vector<LoadSpec> load_loads(const yamlutil::Doc& d, const YAML::Node& node,
 std::vector<PressSpec> load_presses(const yamlutil::Doc& d, const YAML::Node& node,
                                     const std::string& P, const Mesh& mesh,
                                     const std::vector<ClampSpec>& clamps);
+/// An entry's `select` at path P, parsed and resolved to at least one node of the mesh.
+void select_entry_nodes(const yamlutil::Doc& d, const YAML::Node& entry, const std::string& P,
+                        const Mesh& mesh, NodeSelection& selection, std::vector<int>& nodes);
 MarkersSpec load_markers(const yamlutil::Doc& d, const YAML::Node& node, const Mesh& mesh);
 /// The `fit:` section, checked against the rest of the scenario (material, markers, time).
 FitSpec load_fit(const yamlutil::Doc& d, const YAML::Node& node, const Scenario& s);
