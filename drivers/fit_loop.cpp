@@ -101,7 +101,7 @@ struct Context {
   FitProblem& problem;
   const FitOptions& options;
   nlopt::opt* opt = nullptr;
-  std::vector<std::pair<int, int>> pairs;  // smoothness neighbours
+  std::vector<std::unique_ptr<ParameterTerm>> terms;  // Φ's terms in p alone
   std::chrono::steady_clock::time_point start;
   FitOutcome outcome;
   std::exception_ptr error;  // a kelvin::Error from the callback, rethrown after optimize
@@ -174,7 +174,7 @@ double projected_norm(const Eigen::VectorXd& g, const Eigen::Ref<const Eigen::Ve
 
 /// The history record of evaluation `ev` at p (not yet numbered as accepted or
 /// given its iteration), and in g the objective's gradient there (misfit's plus the
-/// smoothness penalty's and the priors'; zero after a failure). Counts a failure.
+/// parameter terms'; zero after a failure). Counts a failure.
 FitRecord record_of(Context& c, const Eigen::VectorXd& p, const Evaluation& ev,
                     double tolerance_scale, Eigen::VectorXd& g) {
   FitRecord r;
@@ -188,9 +188,7 @@ FitRecord record_of(Context& c, const Eigen::VectorXd& p, const Evaluation& ev,
   if (ev.ok) {
     r.misfit = ev.phi;
     r.rms = ev.rms;
-    r.penalty = c.options.smoothness * smoothness_roughness(c.pairs, p, &g);
-    g *= c.options.smoothness;
-    r.penalty += c.problem.map().prior_penalty(p, &g);
+    for (const auto& term : c.terms) r.penalty += term->value(p, &g);
     if (ev.gradient.size()) g += ev.gradient;
     r.objective = r.misfit + r.penalty;
     r.gradient_norm = ev.gradient.size() ? g.norm() : 0;
@@ -377,20 +375,6 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
 
 }  // namespace
 
-double smoothness_roughness(const std::vector<std::pair<int, int>>& pairs,
-                            const Eigen::Ref<const Eigen::VectorXd>& p, Eigen::VectorXd* gradient) {
-  double sum = 0;
-  for (const auto& [a, b] : pairs) {
-    const double d = p[a] - p[b];
-    sum += d * d;
-    if (gradient) {
-      (*gradient)[a] += 2 * d;
-      (*gradient)[b] -= 2 * d;
-    }
-  }
-  return sum;
-}
-
 /// Gauss–Newton preconditioning for a restart of a stalled L-BFGS: in an
 /// ill-conditioned valley (the occluded-bar fit: λ 1.9× off, its gradient 5× below
 /// μ's, Φ's integration noise 1e-3 of the decrease a step could gain) the
@@ -452,6 +436,7 @@ FitOptions fit_options_of(const Scenario& scenario) {
   o.xtol_rel = fit.xtol_rel;
   o.max_seconds = fit.max_seconds;
   o.smoothness = fit.smoothness;
+  o.spline_slope_penalty = fit.spline_slope_penalty;
   return o;
 }
 
@@ -469,7 +454,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   Context c{problem, options};
   c.opt = &opt;
   c.iteration = options.first_iteration;
-  if (options.smoothness > 0) c.pairs = map.neighbour_pairs(problem.mesh());
+  c.terms = parameter_terms(map, problem.model(), options.smoothness, options.spline_slope_penalty);
   c.start = std::chrono::steady_clock::now();
 
   const Eigen::VectorXd lo = map.lower(), hi = map.upper();
@@ -698,7 +683,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
 std::vector<LcurvePoint> run_lcurve(FitProblem& problem, const Eigen::VectorXd& p0,
                                     std::vector<double> gammas, const FitOptions& options) {
   std::sort(gammas.begin(), gammas.end());
-  const auto pairs = problem.map().neighbour_pairs(problem.mesh());
+  const SmoothnessTerm smoothness(problem.map(), problem.mesh(), 1);
   std::vector<LcurvePoint> curve;
   Eigen::VectorXd p = p0;
   for (double gamma : gammas) {
@@ -709,7 +694,7 @@ std::vector<LcurvePoint> run_lcurve(FitProblem& problem, const Eigen::VectorXd& 
     if (out.best.evaluation == 0) break;  // no successful evaluation: nothing to record
     p = out.p;
     curve.push_back(
-        {gamma, out.best.misfit, smoothness_roughness(pairs, p), out.best.rms, out.evaluations, p});
+        {gamma, out.best.misfit, smoothness.roughness(p), out.best.rms, out.evaluations, p});
     if (out.interrupted) break;
   }
   return curve;

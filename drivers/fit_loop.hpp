@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
+#include "adjoint/parameter_terms.hpp"
 #include "adjoint/uncertainty.hpp"
 
 namespace kelvin {
@@ -53,7 +54,8 @@ struct FitOptions {
   /// scenario's. Far from the minimum the misfit dwarfs the integration error of
   /// loose tolerances, and a simulation with its gradient costs a fraction.
   double start_tolerance_scale = 1;
-  double smoothness = 0;  // γ
+  double smoothness = 0;            // γ
+  double spline_slope_penalty = 0;  // w of SplineSlopeTerm (m² s per Pa² of fall); 0 = off
   /// Relative change of Φ the caller needs resolved (0: none given): a gain below it
   /// over the plateau window, or from a restart, is no gain (the diagnosis sets it from
   /// its χ² thresholds; a single-stage fit has no measured accuracy to stop at).
@@ -119,12 +121,5 @@ struct LcurvePoint {
 /// evaluation of every γ.
 std::vector<LcurvePoint> run_lcurve(FitProblem& problem, const Eigen::VectorXd& p0,
                                     std::vector<double> gammas, const FitOptions& options);
-
-/// Σ (p_a − p_b)² over neighbour pairs (ParameterMap::neighbour_pairs); adds its
-/// gradient to *gradient when given. In optimiser space, so log-transformed
-/// fields are smoothed in log space (Bächer 2008, Eq. 5.26).
-double smoothness_roughness(const std::vector<std::pair<int, int>>& pairs,
-                            const Eigen::Ref<const Eigen::VectorXd>& p,
-                            Eigen::VectorXd* gradient = nullptr);
 
 }  // namespace kelvin

@@ -265,6 +265,7 @@ struct FitSpec {
   double ftol_rel = 1e-10, xtol_rel = 1e-8;
   double max_seconds = 0;                // 0 = no limit
   double smoothness = 0;                 // γ of the per-element smoothness term
+  double spline_slope_penalty = 0;       // w of the falling-spline penalty (m² s / Pa²)
   std::vector<double> lcurve;            // γ values of an L-curve sweep (empty = none)
   std::vector<std::string> experiments;  // further scenario files fitted jointly
   int checkpoint_steps = 0;              // most steps one adjoint segment stores; 0 = default

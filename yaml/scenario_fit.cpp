@@ -513,8 +513,8 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
   const std::string P = "fit";
   d.check_keys(n, P,
                {"parameters", "objective", "gradient", "algorithm", "max_evaluations", "ftol_rel",
-                "xtol_rel", "max_seconds", "smoothness", "lcurve", "experiments",
-                "checkpoint_steps", "segment", "start_rtol", "start_scan"});
+                "xtol_rel", "max_seconds", "smoothness", "spline_slope_penalty", "lcurve",
+                "experiments", "checkpoint_steps", "segment", "start_rtol", "start_scan"});
   FitSpec f;
   f.present = true;
 
@@ -580,6 +580,8 @@ FitSpec load_fit(const Doc& d, const Node& n, const Scenario& s) {
   if (const Node v = n["start_scan"])
     f.start_scan = d.choice(v, join(P, "start_scan"), {"stiffness", "none"});
   if (const Node v = n["smoothness"]) f.smoothness = d.non_negative(v, join(P, "smoothness"), "");
+  if (const Node v = n["spline_slope_penalty"])
+    f.spline_slope_penalty = d.non_negative(v, join(P, "spline_slope_penalty"), "m² s/Pa²");
   if (const Node v = n["lcurve"]) {
     const std::string LP = join(P, "lcurve");
     d.require_sequence(v, LP);
