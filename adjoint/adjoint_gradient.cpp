@@ -27,7 +27,7 @@
 #include <cstring>
 
 #include "adjoint/experiment_run.hpp"
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/schur_solver.hpp"
 #include "engine/state_vector.hpp"
 

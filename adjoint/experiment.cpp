@@ -7,8 +7,8 @@
 #include <cmath>
 
 #include "adjoint/experiment_run.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
+#include "base/error.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 

@@ -5,7 +5,7 @@
 #include <chrono>
 #include <filesystem>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "materials/material.hpp"
 #include "probing/probe_experiment.hpp"
 

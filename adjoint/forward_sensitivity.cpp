@@ -7,7 +7,7 @@
 #include <functional>
 
 #include "adjoint/experiment_run.hpp"
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 namespace {

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <random>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 namespace {

@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "base/error.hpp"
 #include "engine/cubic_spline.hpp"
-#include "engine/error.hpp"
 
 namespace kelvin {
 

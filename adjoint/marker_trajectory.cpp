@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "adjoint/experiment_run.hpp"
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/markers.hpp"
 
 namespace kelvin {

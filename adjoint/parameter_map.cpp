@@ -7,7 +7,7 @@
 #include <cmath>
 #include <map>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 namespace {

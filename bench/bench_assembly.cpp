@@ -16,9 +16,9 @@
 
 #include "bench/foam_cylinder.hpp"
 #include "engine/dae_system.hpp"
-#include "engine/simulation.hpp"
 #include "engine/threads.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 using namespace kelvin;
 

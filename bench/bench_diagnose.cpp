@@ -11,8 +11,8 @@
 #include <filesystem>
 #include <string>
 
+#include "base/error.hpp"
 #include "diagnose/diagnosis.hpp"
-#include "engine/error.hpp"
 
 namespace fs = std::filesystem;
 using namespace kelvin;

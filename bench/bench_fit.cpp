@@ -25,12 +25,12 @@
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "bench/bench_bar.hpp"
 #include "bench/foam_cylinder.hpp"
 #include "drivers/fit_loop.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace fs = std::filesystem;
 using namespace kelvin;

@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "bench/foam_cylinder.hpp"
-#include "engine/simulation.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 using namespace kelvin;
 using kelvin::bench::remeshed;

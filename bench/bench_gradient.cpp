@@ -29,9 +29,9 @@
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "bench/foam_cylinder.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 using namespace kelvin;
 

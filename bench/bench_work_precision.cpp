@@ -33,12 +33,12 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/marker_trajectory.hpp"
+#include "base/error.hpp"
 #include "bench/bdf2_baseline.hpp"
 #include "bench/bench_bar.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "engine/threads.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace fs = std::filesystem;
 using namespace kelvin;

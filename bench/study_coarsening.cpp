@@ -22,10 +22,10 @@
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "drivers/fit_loop.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace fs = std::filesystem;
 using namespace kelvin;

@@ -12,7 +12,7 @@
 #include <map>
 #include <optional>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/input_size.hpp"
 
 namespace kelvin {

@@ -7,9 +7,9 @@
 #include <cstring>
 #include <fstream>
 
+#include "base/error.hpp"
 #include "capture/c3d_reader.hpp"
 #include "capture/motive_csv_reader.hpp"
-#include "engine/error.hpp"
 #include "engine/input_size.hpp"
 
 namespace kelvin {

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <optional>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 namespace {

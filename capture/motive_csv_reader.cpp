@@ -6,7 +6,7 @@
 #include <limits>
 #include <map>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 namespace {

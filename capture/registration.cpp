@@ -5,7 +5,7 @@
 #include <Eigen/SVD>
 #include <cmath>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 

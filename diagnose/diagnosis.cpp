@@ -15,12 +15,12 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
+#include "base/error.hpp"
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/heldout_prediction.hpp"
 #include "diagnose/learned_correction.hpp"
 #include "drivers/fit_loop.hpp"
 #include "drivers/fitted_scenario.hpp"
-#include "engine/error.hpp"
 #include "engine/output.hpp"
 
 namespace kelvin {

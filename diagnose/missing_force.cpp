@@ -7,10 +7,10 @@
 #include <cmath>
 #include <filesystem>
 
+#include "base/error.hpp"
 #include "drivers/body_force_outputs.hpp"
 #include "drivers/fit_loop.hpp"
 #include "drivers/fitted_scenario.hpp"
-#include "engine/error.hpp"
 #include "engine/output.hpp"
 #include "yaml/scenario_paths.hpp"
 #include "yaml/yaml_util.hpp"

@@ -4,9 +4,9 @@
 
 #include <filesystem>
 
+#include "base/error.hpp"
 #include "capture/conversion.hpp"
 #include "drivers/commands.hpp"
-#include "engine/error.hpp"
 #include "engine/output.hpp"
 
 namespace kelvin {

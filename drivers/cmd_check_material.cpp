@@ -3,8 +3,8 @@
 #include <filesystem>
 #include <map>
 
+#include "base/error.hpp"
 #include "drivers/commands.hpp"
-#include "engine/error.hpp"
 #include "materials/derivative_check.hpp"
 #include "materials/material.hpp"
 #include "materials/plugin_loader.hpp"

@@ -5,10 +5,10 @@
 #include <chrono>
 #include <filesystem>
 
+#include "base/error.hpp"
 #include "diagnose/diagnosis.hpp"
 #include "diagnose/diagnosis_outputs.hpp"
 #include "drivers/commands.hpp"
-#include "engine/error.hpp"
 #include "materials/crash_report.hpp"
 
 namespace kelvin {

@@ -7,12 +7,12 @@
 #include <cmath>
 #include <filesystem>
 
+#include "base/error.hpp"
 #include "drivers/commands.hpp"
 #include "drivers/fit_loop.hpp"
 #include "drivers/fit_outputs.hpp"
 #include "drivers/fit_state.hpp"
 #include "drivers/stiffness_scan.hpp"
-#include "engine/error.hpp"
 #include "materials/crash_report.hpp"
 #include "yaml/scenario.hpp"
 

@@ -3,8 +3,8 @@
 #include <fmt/format.h>
 
 #include "adjoint/gradient_check.hpp"
+#include "base/error.hpp"
 #include "drivers/commands.hpp"
-#include "engine/error.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {

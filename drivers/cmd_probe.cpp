@@ -8,8 +8,8 @@
 #include <filesystem>
 #include <memory>
 
+#include "base/error.hpp"
 #include "drivers/commands.hpp"
-#include "engine/error.hpp"
 #include "engine/output.hpp"
 #include "probing/parameter_sets.hpp"
 #include "probing/probe_experiment.hpp"

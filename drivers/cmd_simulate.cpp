@@ -2,11 +2,11 @@
 
 #include <filesystem>
 
+#include "base/error.hpp"
 #include "drivers/commands.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "materials/crash_report.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 

@@ -8,7 +8,7 @@
 #include <exception>
 #include <nlopt.hpp>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 namespace {

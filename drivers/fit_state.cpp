@@ -7,8 +7,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "engine/output.hpp"
 
 namespace kelvin {

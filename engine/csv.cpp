@@ -12,7 +12,7 @@
 #include <map>
 #include <set>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/input_size.hpp"
 
 namespace kelvin {

@@ -3,7 +3,7 @@
 #include <Eigen/SparseLU>
 #include <vector>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 

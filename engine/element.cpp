@@ -4,7 +4,7 @@
 
 #include <Eigen/LU>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 

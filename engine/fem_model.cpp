@@ -7,7 +7,7 @@
 #include <exception>
 #include <limits>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/threads.hpp"
 
 namespace kelvin {

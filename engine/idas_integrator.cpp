@@ -9,8 +9,8 @@
 #include <cmath>
 #include <vector>
 
+#include "base/error.hpp"
 #include "engine/dae_system.hpp"
-#include "engine/error.hpp"
 #include "engine/schur_solver.hpp"
 #include "engine/state_vector.hpp"
 

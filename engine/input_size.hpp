@@ -8,7 +8,7 @@
 #include <filesystem>
 #include <string>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 

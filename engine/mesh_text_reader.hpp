@@ -11,7 +11,7 @@
 #include <sstream>
 #include <string>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/input_size.hpp"
 
 namespace kelvin {

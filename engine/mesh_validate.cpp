@@ -7,7 +7,7 @@
 #include <map>
 #include <vector>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/mesh.hpp"
 
 namespace kelvin {

@@ -7,8 +7,8 @@
 #include <limits>
 #include <numbers>
 
+#include "base/error.hpp"
 #include "engine/cubic_spline.hpp"
-#include "engine/error.hpp"
 
 namespace kelvin {
 

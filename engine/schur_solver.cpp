@@ -3,7 +3,7 @@
 #include <cholmod.h>
 #include <klu.h>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin {
 

@@ -12,7 +12,7 @@
 #include <fstream>
 #include <string>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin::fuzz {
 

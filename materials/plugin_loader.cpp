@@ -5,7 +5,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "materials/crash_report.hpp"
 #include "materials/plugin_abi.h"
 

@@ -2,7 +2,7 @@
 #include <functional>
 #include <map>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "materials/corotational.hpp"
 #include "materials/drag.hpp"
 #include "materials/fiber.hpp"

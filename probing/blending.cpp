@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "base/error.hpp"
 #include "engine/element.hpp"
-#include "engine/error.hpp"
 #include "engine/static_solver.hpp"
 #include "probing/probing_system.hpp"
 

@@ -7,7 +7,7 @@
 #include <exception>
 #include <nlopt.hpp>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/static_solver.hpp"
 
 namespace kelvin {

@@ -7,7 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "probing/probing_system.hpp"
 
 namespace kelvin {

@@ -4,8 +4,8 @@
 
 #include <cmath>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "probing/probing_system.hpp"
 
 namespace kelvin {

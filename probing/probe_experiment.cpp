@@ -2,9 +2,9 @@
 
 #include <fmt/format.h>
 
+#include "base/error.hpp"
 #include "engine/clamp_reaction.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <limits>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "yaml/scenario_sections.hpp"
 #include "yaml/yaml_util.hpp"
 

@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <array>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/static_solver.hpp"
 
 namespace kelvin {

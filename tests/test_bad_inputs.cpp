@@ -9,11 +9,11 @@
 #include <fstream>
 #include <thread>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 namespace {

@@ -11,11 +11,11 @@
 #include <fstream>
 #include <random>
 
+#include "base/error.hpp"
 #include "capture/c3d_reader.hpp"
 #include "capture/conversion.hpp"
 #include "capture/motion_start.hpp"
 #include "capture/registration.hpp"
-#include "engine/error.hpp"
 #include "test_support.hpp"
 
 namespace kelvin {

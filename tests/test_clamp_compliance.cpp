@@ -9,12 +9,12 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 namespace {

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <string>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 
 namespace {
 

@@ -9,6 +9,7 @@
 #include <random>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "diagnose/candidates.hpp"
 #include "diagnose/diagnose_settings.hpp"
 #include "diagnose/diagnosis.hpp"
@@ -17,7 +18,6 @@
 #include "diagnose/learned_correction.hpp"
 #include "diagnose/noise.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 

@@ -10,10 +10,10 @@
 #include <regex>
 #include <sstream>
 
+#include "base/error.hpp"
 #include "drivers/fit_report.hpp"
 #include "drivers/fit_state.hpp"
 #include "drivers/svg_plot.hpp"
-#include "engine/error.hpp"
 
 namespace fs = std::filesystem;
 using kelvin::svg::Plot;

@@ -9,10 +9,10 @@
 #include <string>
 #include <vector>
 
+#include "base/error.hpp"
 #include "drivers/fitted_scenario.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
 #include "test_support.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 using namespace kelvin;
 using kelvin::test::read_text;

@@ -12,10 +12,10 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/gradient_check.hpp"
-#include "engine/simulation.hpp"
 #include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 namespace {

@@ -10,8 +10,8 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
+#include "base/error.hpp"
 #include "drivers/fit_loop.hpp"
-#include "engine/error.hpp"
 #include "test_support.hpp"
 
 namespace kelvin {

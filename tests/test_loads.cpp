@@ -8,8 +8,8 @@
 
 #include <cmath>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "tests/test_support.hpp"
 
 using namespace kelvin;

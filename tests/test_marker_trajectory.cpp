@@ -13,10 +13,10 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/marker_trajectory.hpp"
 #include "adjoint/uncertainty.hpp"
-#include "engine/error.hpp"
-#include "engine/simulation.hpp"
+#include "base/error.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 namespace {

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <string>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/markers.hpp"
 #include "engine/mesh.hpp"
 

@@ -9,7 +9,7 @@
 #include <sstream>
 #include <string>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/mesh.hpp"
 #include "engine/mesh_refine.hpp"
 #include "engine/selection.hpp"

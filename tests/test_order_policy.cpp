@@ -9,9 +9,9 @@
 
 #include "engine/markers.hpp"
 #include "engine/order_policy.hpp"
-#include "engine/simulation.hpp"
 #include "tests/test_support.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin {
 namespace {

@@ -11,8 +11,8 @@
 #include <regex>
 #include <sstream>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "engine/output.hpp"
 
 namespace fs = std::filesystem;

@@ -2,7 +2,7 @@
 // wrong ABI, a missing symbol, a NaN or a throw are reported, never crash.
 #include <gtest/gtest.h>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "materials/derivative_check.hpp"
 #include "materials/material.hpp"
 #include "materials/plugin_loader.hpp"

@@ -12,8 +12,8 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "engine/clamp_reaction.hpp"
-#include "engine/error.hpp"
 #include "engine/static_solver.hpp"
 #include "probing/displacement_inverse.hpp"
 #include "probing/force_inverse.hpp"

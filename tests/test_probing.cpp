@@ -16,7 +16,7 @@
 #include <memory>
 #include <random>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/fem_model.hpp"
 #include "engine/mesh.hpp"
 #include "engine/selection.hpp"

@@ -7,7 +7,7 @@
 #include <numbers>
 #include <vector>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/rigid_motion.hpp"
 
 namespace {

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "yaml/scenario.hpp"
 #include "yaml/yaml_util.hpp"
 

@@ -12,9 +12,9 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
+#include "base/error.hpp"
 #include "drivers/fit_loop.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"

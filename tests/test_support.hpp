@@ -11,8 +11,8 @@
 #include <string>
 
 #include "engine/csv.hpp"
-#include "engine/simulation.hpp"
 #include "yaml/scenario.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 namespace kelvin::test {
 

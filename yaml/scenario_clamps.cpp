@@ -8,9 +8,9 @@
 #include <map>
 #include <set>
 
+#include "base/error.hpp"
 #include "engine/clamp_spring.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "yaml/scenario_sections.hpp"
 
 namespace kelvin::scenario_detail {

@@ -10,7 +10,7 @@
 #include <cmath>
 #include <filesystem>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "materials/material.hpp"
 #include "yaml/scenario_sections.hpp"
 

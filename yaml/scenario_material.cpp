@@ -9,8 +9,8 @@
 #include <fstream>
 #include <map>
 
+#include "base/error.hpp"
 #include "engine/csv.hpp"
-#include "engine/error.hpp"
 #include "engine/mesh_refine.hpp"
 #include "materials/material.hpp"
 #include "yaml/scenario_sections.hpp"

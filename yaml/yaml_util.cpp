@@ -9,7 +9,7 @@
 #include <fstream>
 #include <set>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 
 namespace kelvin::yamlutil {
 

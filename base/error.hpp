@@ -1,6 +1,7 @@
 #pragma once
-// One exception type for every user-facing failure. The message is meant to be
-// printed as it is: it already names the file/line/key, element or time.
+// One exception type for every user-facing failure, below every layer (materials
+// included). The message is meant to be printed as it is: it already names the
+// file/line/key, element or time.
 #include <stdexcept>
 #include <string>
 

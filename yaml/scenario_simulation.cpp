@@ -1,4 +1,4 @@
-#include "engine/simulation.hpp"
+#include "yaml/scenario_simulation.hpp"
 
 #include <fmt/format.h>
 
@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <map>
 
-#include "engine/error.hpp"
+#include "base/error.hpp"
 #include "engine/output.hpp"
 
 namespace kelvin {
