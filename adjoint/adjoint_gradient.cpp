@@ -16,10 +16,6 @@
 // The forward model restarts at the same boundaries in every pass, so the gradient
 // is exact for the trajectory whose Φ is reported.
 #include <fmt/format.h>
-#include <idas/idas.h>
-#include <nvector/nvector_serial.h>
-#include <sunlinsol/sunlinsol_klu.h>
-#include <sunmatrix/sunmatrix_sparse.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -28,6 +24,7 @@
 
 #include "adjoint/experiment_run.hpp"
 #include "base/error.hpp"
+#include "engine/idas_backward.hpp"
 #include "engine/schur_solver.hpp"
 #include "engine/state_vector.hpp"
 
@@ -45,7 +42,6 @@ struct Backward {
   mutable ElementSlots slots;      // transpose_multiply's workspace
   Experiment::AdjointPeaks peak;   // of |λx|, |λv| at the steps taken
   Eigen::Matrix3Xd x, v;
-  std::string fatal;
 
   explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model), kt(r.n), dt(r.n) {}
 
@@ -91,79 +87,6 @@ struct Backward {
   }
 };
 
-Backward* backward_of(void* data) {
-  return static_cast<Backward*>(data);
-}
-
-int residual_b(realtype t, N_Vector y, N_Vector, N_Vector l, N_Vector lp, N_Vector r, void* data) {
-  Backward* b = backward_of(data);
-  try {
-    if (!b->at(t, N_VGetArrayPointer(y))) return 1;
-  } catch (const std::exception& e) {
-    b->fatal = e.what();
-    return -1;
-  }
-  b->residual(N_VGetArrayPointer(l), N_VGetArrayPointer(lp), N_VGetArrayPointer(r));
-  return 0;
-}
-
-int quadrature_b(realtype t, N_Vector y, N_Vector yp, N_Vector l, N_Vector, N_Vector q,
-                 void* data) {
-  Backward* b = backward_of(data);
-  ExperimentRun& run = b->run;
-  try {
-    run.expand(t, N_VGetArrayPointer(y), N_VGetArrayPointer(yp));
-    const Eigen::Map<const Eigen::VectorXd> lambda(N_VGetArrayPointer(l), 2 * b->n);
-    b->peak.x = std::max(b->peak.x, lambda.head(b->n).lpNorm<Eigen::Infinity>());
-    b->peak.v = std::max(b->peak.v, lambda.tail(b->n).lpNorm<Eigen::Infinity>());
-    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(q), N_VGetLength(q)).setZero();
-    const ElementTangents* cached =
-        b->cached_at(t, N_VGetArrayPointer(y)) ? &b->dae.tangents() : nullptr;
-    if (!run.contract(N_VGetArrayPointer(l) + b->n, 1.0, N_VGetArrayPointer(q), cached)) return 1;
-  } catch (const std::exception& e) {
-    b->fatal = e.what();
-    return -1;
-  }
-  return 0;
-}
-
-int jacobian_b(realtype t, realtype cjB, N_Vector y, N_Vector, N_Vector, N_Vector, N_Vector,
-               SUNMatrix, void* data, N_Vector, N_Vector, N_Vector) {
-  Backward* b = backward_of(data);
-  try {
-    if (!b->at(t, N_VGetArrayPointer(y))) return 1;
-    b->dae.assemble_from_tangents();
-    b->schur.assemble_from_last(-cjB);
-    return 0;
-  } catch (const std::exception& e) {
-    b->fatal = e.what();
-    return -1;
-  }
-}
-
-int setup_b(SUNLinearSolver S, SUNMatrix) {
-  return static_cast<Backward*>(S->content)->schur.factorize() ? 0 : SUNLS_PACKAGE_FAIL_REC;
-}
-int solve_b(SUNLinearSolver S, SUNMatrix, N_Vector x, N_Vector rhs, realtype) {
-  static_cast<Backward*>(S->content)
-      ->schur.solve_adjoint(N_VGetArrayPointer(rhs), N_VGetArrayPointer(x));
-  return 0;
-}
-SUNLinearSolver_Type type_b(SUNLinearSolver) {
-  return SUNLINEARSOLVER_DIRECT;
-}
-SUNLinearSolver_ID id_b(SUNLinearSolver) {
-  return SUNLINEARSOLVER_CUSTOM;
-}
-int free_b(SUNLinearSolver S) {
-  SUNLinSolFreeEmpty(S);
-  return 0;
-}
-
-void check(int flag, const char* call) {
-  if (flag < 0) throw Error(fmt::format("IDAS adjoint setup failed in {} (flag {})", call, flag));
-}
-
 /// Backward absolute tolerances: rtol × this × the typical |λx|, |λv|
 /// (ExperimentRun::lambda_x_ref, lambda_v_ref, the peaks of the last pass). On the
 /// bench bar (2 s), against a backward pass converged in its tolerances over the
@@ -198,91 +121,61 @@ bool beyond(double a, double b) {
   return a > kLooseTolerance * b;
 }
 
-/// Adds the counters of one backward pass (IDAS's own, restarted per pass).
-void add_backward_stats(void* mem_b, IntegratorStats& stats) {
-  long v = 0;
-  if (IDAGetNumSteps(mem_b, &v) == 0) stats.steps += v;
-  if (IDAGetNumResEvals(mem_b, &v) == 0) stats.residual_evals += v;
-  if (IDAGetNumJacEvals(mem_b, &v) == 0) stats.jacobian_evals += v;
-  if (IDAGetNumLinSolvSetups(mem_b, &v) == 0) stats.linear_setups += v;
-  if (IDAGetNumErrTestFails(mem_b, &v) == 0) stats.error_test_failures += v;
-  if (IDAGetNumNonlinSolvConvFails(mem_b, &v) == 0) stats.convergence_failures += v;
-}
-
 /// Solves one segment backward from (T1, λ) to T0; adds −∫λvᵀ∂R/∂p dt to dphi_dp and
 /// raises `seen` to the peaks of |λx|, |λv| it met.
 bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, double T1,
                       Eigen::VectorXd& lambda, Eigen::VectorXd& dphi_dp,
                       Experiment::AdjointPeaks& seen, ExperimentResult& result) {
   const int n = run.n;
-  void* mem = forward.idas_memory();
-  auto ctx = static_cast<SUNContext>(forward.sundials_context());
   Backward b(run);
-  const long nq = static_cast<long>(dphi_dp.size());
-  N_Vector l = new_state_vector(2 * n, ctx), lp = new_state_vector(2 * n, ctx),
-           q = N_VNew_Serial(nq, ctx), atol = new_state_vector(2 * n, ctx);
-  SUNMatrix J = SUNSparseMatrix(2 * n, 2 * n, 1, CSC_MAT, ctx);
-  SUNLinearSolver LS = SUNLinSolNewEmpty(ctx);
-  struct Cleanup {
-    std::vector<N_Vector> v;
-    SUNMatrix J;
-    ~Cleanup() {
-      for (N_Vector x : v) N_VDestroy(x);
-      SUNMatDestroy(J);
-    }
-  } cleanup{{l, lp, q, atol}, J};
-  LS->content = &b;
-  LS->ops->gettype = type_b;
-  LS->ops->getid = id_b;
-  LS->ops->setup = setup_b;
-  LS->ops->solve = solve_b;
-  LS->ops->free = free_b;
+  BackwardProblem problem;
+  problem.schur = &b.schur;
+  problem.residual = [&b](double t, const double* y, const double* l, const double* lp, double* r) {
+    if (!b.at(t, y)) return false;
+    b.residual(l, lp, r);
+    return true;
+  };
+  problem.quadrature = [&b, &run, n](double t, const double* y, const double* yp, const double* l,
+                                     double* q) {
+    run.expand(t, y, yp);
+    const Eigen::Map<const Eigen::VectorXd> lam(l, 2 * n);
+    b.peak.x = std::max(b.peak.x, lam.head(n).lpNorm<Eigen::Infinity>());
+    b.peak.v = std::max(b.peak.v, lam.tail(n).lpNorm<Eigen::Infinity>());
+    std::fill(q, q + run.map.size(), 0.0);
+    const ElementTangents* cached = b.cached_at(t, y) ? &b.dae.tangents() : nullptr;
+    return run.contract(l + n, 1.0, q, cached);
+  };
+  problem.jacobian = [&b](double t, double cj, const double* y) {
+    if (!b.at(t, y)) return false;
+    b.dae.assemble_from_tangents();
+    b.schur.assemble_from_last(-cj);
+    return true;
+  };
 
-  Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(l), 2 * n) = lambda;
+  Eigen::VectorXd lambda_rate(2 * n);
   {
     Eigen::VectorXd yT(2 * n);
     yT << forward.positions(), forward.velocities();
     if (!b.at(T1, yT.data())) throw Error("the final state is inadmissible");
-    b.consistent_derivative(N_VGetArrayPointer(l), N_VGetArrayPointer(lp));
+    b.consistent_derivative(lambda.data(), lambda_rate.data());
   }
-  N_VConst(0.0, q);
+  IdasBackward backward(forward, std::move(problem), T1, lambda, lambda_rate,
+                        static_cast<int>(dphi_dp.size()), run.iopt.max_order, run.iopt.max_steps);
 
-  int which = 0;
-  check(IDACreateB(mem, &which), "IDACreateB");
-  check(IDAInitB(mem, which, residual_b, T1, l, lp), "IDAInitB");
-  check(IDASetUserDataB(mem, which, &b), "IDASetUserDataB");
-  check(IDASetMaxNumStepsB(mem, which, run.iopt.max_steps), "IDASetMaxNumStepsB");
-  check(IDASetMaxOrdB(mem, which, run.iopt.max_order), "IDASetMaxOrdB");
-  check(IDASetLinearSolverB(mem, which, LS, J), "IDASetLinearSolverB");
-  check(IDASetJacFnB(mem, which, jacobian_b), "IDASetJacFnB");
-  check(IDAQuadInitB(mem, which, quadrature_b, q), "IDAQuadInitB");
-  check(IDASetQuadErrConB(mem, which, SUNFALSE), "IDASetQuadErrConB");
-
-  // l, lp and q keep their initial values until IDAGetB: a pass solved again
-  // restarts from them over the same stored forward steps.
-  double* at = N_VGetArrayPointer(atol);
+  // Each attempt restarts from λ(T1) over the same stored forward steps.
   const double rtol = run.iopt.rtol * (run.iopt.max_order <= 2 ? kLowOrderBackwardRtolScale : 1.0);
+  Eigen::VectorXd atol(2 * n);
   for (int attempt = 0;; ++attempt) {
-    for (int i = 0; i < n; ++i) {
-      at[i] = rtol * kAdjointAtolFactor * run.lambda_x_ref;
-      at[n + i] = rtol * kAdjointAtolFactor * run.lambda_v_ref;
-    }
-    if (attempt > 0) {
-      check(IDAReInitB(mem, which, T1, l, lp), "IDAReInitB");
-      check(IDAQuadReInitB(mem, which, q), "IDAQuadReInitB");
-    }
-    check(IDASVtolerancesB(mem, which, rtol, atol), "IDASVtolerancesB");
+    atol.head(n).setConstant(rtol * kAdjointAtolFactor * run.lambda_x_ref);
+    atol.tail(n).setConstant(rtol * kAdjointAtolFactor * run.lambda_v_ref);
     b.peak = {};
-    const int flag = IDASolveB(mem, T0, IDA_NORMAL);
-    long steps = 0;
-    void* mem_b = IDAGetAdjIDABmem(mem, which);
-    IDAGetNumSteps(mem_b, &steps);
-    result.backward_steps += steps;
-    add_backward_stats(mem_b, result.backward_stats);
-    if (flag < 0) {
-      result.error =
-          fmt::format("the adjoint solve failed between t = {:.6g} and {:.6g} s ({}{})", T0, T1,
-                      IDAGetReturnFlagName(flag), b.fatal.empty() ? "" : ": " + b.fatal);
+    const bool ok = backward.solve(T0, rtol, atol);
+    const IntegratorStats stats = backward.stats();
+    result.backward_steps += stats.steps;
+    result.backward_stats += stats;
+    if (!ok) {
+      result.error = fmt::format("the adjoint solve failed between t = {:.6g} and {:.6g} s ({})",
+                                 T0, T1, backward.error());
       return false;
     }
     seen.x = std::max(seen.x, b.peak.x);
@@ -293,11 +186,8 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
     run.lambda_x_ref = std::min(run.lambda_x_ref, seen.x);
     run.lambda_v_ref = std::min(run.lambda_v_ref, seen.v);
   }
-  double t = 0;
-  check(IDAGetB(mem, which, &t, l, lp), "IDAGetB");
-  check(IDAGetQuadB(mem, which, &t, q), "IDAGetQuadB");
-  lambda = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(l), 2 * n);
-  dphi_dp += Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(q), nq);
+  lambda = backward.lambda();
+  dphi_dp += backward.quadrature();
   return true;
 }
 

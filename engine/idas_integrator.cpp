@@ -11,6 +11,7 @@
 
 #include "base/error.hpp"
 #include "engine/dae_system.hpp"
+#include "engine/schur_linear_solver.hpp"
 #include "engine/schur_solver.hpp"
 #include "engine/state_vector.hpp"
 
@@ -49,6 +50,7 @@ struct IdasIntegrator::Impl {
 
   DaeSystem dae;
   SchurSolver schur{dae};
+  SchurLinearSolver linear_solver{&schur, false, &stats};
 
   // diagnostics
   IntegratorStats stats;
@@ -182,52 +184,6 @@ void error_handler(int, const char* module, const char* function, char* msg, voi
   impl->last_idas_message = fmt::format("{} {}: {}", module, function, msg);
 }
 
-/// SUNLinearSolver adapter for SchurSolver: setup factorises the matrix the
-/// Jacobian callback assembled, solve applies it; both are timed for the summary.
-IdasIntegrator::Impl* impl_of(SUNLinearSolver S) {
-  return static_cast<IdasIntegrator::Impl*>(S->content);
-}
-SUNLinearSolver_Type schur_type(SUNLinearSolver) {
-  return SUNLINEARSOLVER_DIRECT;
-}
-SUNLinearSolver_ID schur_id(SUNLinearSolver) {
-  return SUNLINEARSOLVER_CUSTOM;
-}
-int schur_setup(SUNLinearSolver S, SUNMatrix) {
-  auto* m = impl_of(S);
-  const auto start = Clock::now();
-  const bool ok = m->schur.factorize();
-  m->stats.setup_seconds += seconds_since(start);
-  return ok ? 0 : SUNLS_PACKAGE_FAIL_REC;  // singular: IDAS retries with a smaller step
-}
-int schur_solve(SUNLinearSolver S, SUNMatrix, N_Vector x, N_Vector b, realtype) {
-  auto* m = impl_of(S);
-  const auto start = Clock::now();
-  m->schur.solve(N_VGetArrayPointer(b), N_VGetArrayPointer(x));
-  m->stats.solve_seconds += seconds_since(start);
-  ++m->stats.linear_solves;
-  return 0;
-}
-int schur_free(SUNLinearSolver S) {
-  SUNLinSolFreeEmpty(S);
-  return 0;
-}
-SUNLinearSolver make_schur_linear_solver(SUNContext ctx, IdasIntegrator::Impl* impl) {
-  SUNLinearSolver S = SUNLinSolNewEmpty(ctx);
-  if (!S) return nullptr;
-  S->content = impl;
-  S->ops->gettype = schur_type;
-  S->ops->getid = schur_id;
-  S->ops->setup = schur_setup;
-  S->ops->solve = schur_solve;
-  S->ops->free = schur_free;
-  return S;
-}
-
-void check(int flag, const char* call) {
-  if (flag < 0) throw Error(fmt::format("IDAS setup failed in {} (flag {})", call, flag));
-}
-
 }  // namespace
 
 double IntegratorStats::mean_order() const {
@@ -239,6 +195,22 @@ double IntegratorStats::mean_order() const {
   return total ? static_cast<double>(weighted) / total : 0.0;
 }
 
+IntegratorStats& IntegratorStats::operator+=(const IntegratorStats& o) {
+  steps += o.steps;
+  residual_evals += o.residual_evals;
+  jacobian_evals += o.jacobian_evals;
+  linear_setups += o.linear_setups;
+  linear_solves += o.linear_solves;
+  error_test_failures += o.error_test_failures;
+  convergence_failures += o.convergence_failures;
+  for (size_t q = 0; q < order_histogram.size(); ++q) order_histogram[q] += o.order_histogram[q];
+  jacobian_seconds += o.jacobian_seconds;
+  setup_seconds += o.setup_seconds;
+  solve_seconds += o.solve_seconds;
+  residual_seconds += o.residual_seconds;
+  return *this;
+}
+
 IdasIntegrator::IdasIntegrator(const FemModel& model, const IntegratorOptions& options)
     : impl_(std::make_unique<Impl>(model, options)) {}
 
@@ -248,7 +220,7 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   Impl& m = *impl_;
   const int n = m.n;
   if (n == 0) throw Error("every node is clamped: there is nothing to simulate");
-  check(SUNContext_Create(nullptr, &m.ctx), "SUNContext_Create");
+  check_sundials(SUNContext_Create(nullptr, &m.ctx), "SUNContext_Create");
   m.y = new_state_vector(2 * n, m.ctx);
   m.yp = new_state_vector(2 * n, m.ctx);
   m.yout = new_state_vector(2 * n, m.ctx);
@@ -265,8 +237,8 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
 
   m.mem = IDACreate(m.ctx);
   if (!m.mem) throw Error("IDACreate failed");
-  check(IDASetErrHandlerFn(m.mem, error_handler, &m), "IDASetErrHandlerFn");
-  check(IDAInit(m.mem, residual_fn, t0, m.y, m.yp), "IDAInit");
+  check_sundials(IDASetErrHandlerFn(m.mem, error_handler, &m), "IDASetErrHandlerFn");
+  check_sundials(IDAInit(m.mem, residual_fn, t0, m.y, m.yp), "IDAInit");
   double* atol = N_VGetArrayPointer(m.atol);
   for (int i = 0; i < n; ++i) {
     atol[i] = m.opt.atol;
@@ -274,17 +246,18 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   }
   m.rest.resize(n);
   m.model.restrict(m.model.mesh().nodes, m.rest.data());
-  check(IDASetUserData(m.mem, &m), "IDASetUserData");  // before IDAWFtolerances: its data
-  check(IDAWFtolerances(m.mem, error_weights), "IDAWFtolerances");
+  check_sundials(IDASetUserData(m.mem, &m), "IDASetUserData");  // before IDAWFtolerances: its data
+  check_sundials(IDAWFtolerances(m.mem, error_weights), "IDAWFtolerances");
   // The Newton matrix lives in SchurSolver; IDAS only needs a placeholder matrix.
   m.J = SUNSparseMatrix(2 * n, 2 * n, 1, CSC_MAT, m.ctx);
-  m.LS = make_schur_linear_solver(m.ctx, &m);
+  m.LS = make_schur_linear_solver(m.ctx, &m.linear_solver);
   if (!m.J || !m.LS) throw Error("could not create the IDAS linear solver");
-  check(IDASetLinearSolver(m.mem, m.LS, m.J), "IDASetLinearSolver");
-  check(IDASetJacFn(m.mem, jacobian_fn), "IDASetJacFn");
-  check(IDASetMaxNumSteps(m.mem, m.opt.max_steps), "IDASetMaxNumSteps");
-  if (m.opt.max_step > 0) check(IDASetMaxStep(m.mem, m.opt.max_step), "IDASetMaxStep");
-  if (m.opt.initial_step > 0) check(IDASetInitStep(m.mem, m.opt.initial_step), "IDASetInitStep");
+  check_sundials(IDASetLinearSolver(m.mem, m.LS, m.J), "IDASetLinearSolver");
+  check_sundials(IDASetJacFn(m.mem, jacobian_fn), "IDASetJacFn");
+  check_sundials(IDASetMaxNumSteps(m.mem, m.opt.max_steps), "IDASetMaxNumSteps");
+  if (m.opt.max_step > 0) check_sundials(IDASetMaxStep(m.mem, m.opt.max_step), "IDASetMaxStep");
+  if (m.opt.initial_step > 0)
+    check_sundials(IDASetInitStep(m.mem, m.opt.initial_step), "IDASetInitStep");
   m.t_solver = t0;
   t_ = t0;
   x_ = x0;
@@ -296,11 +269,11 @@ void IdasIntegrator::add_quadrature(int nq, QuadratureRhs rhs, bool error_contro
   m.quad_rhs = std::move(rhs);
   m.q = N_VNew_Serial(nq, m.ctx);
   N_VConst(0.0, m.q);
-  check(IDAQuadInit(m.mem, quadrature_fn, m.q), "IDAQuadInit");
+  check_sundials(IDAQuadInit(m.mem, quadrature_fn, m.q), "IDAQuadInit");
   m.quad_error_control = error_control;
   if (error_control) {
-    check(IDAQuadSStolerances(m.mem, m.opt.rtol, atol), "IDAQuadSStolerances");
-    check(IDASetQuadErrCon(m.mem, SUNTRUE), "IDASetQuadErrCon");
+    check_sundials(IDAQuadSStolerances(m.mem, m.opt.rtol, atol), "IDAQuadSStolerances");
+    check_sundials(IDASetQuadErrCon(m.mem, SUNTRUE), "IDASetQuadErrCon");
   }
 }
 
@@ -323,9 +296,10 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
     Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.yS[i]), 2 * m.n) = yS0.col(i);
     Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.ypS[i]), 2 * m.n) = ypS0.col(i);
   }
-  check(IDASensInit(m.mem, m.ns, IDA_STAGGERED, sensitivity_fn, m.yS, m.ypS), "IDASensInit");
+  check_sundials(IDASensInit(m.mem, m.ns, IDA_STAGGERED, sensitivity_fn, m.yS, m.ypS),
+                 "IDASensInit");
   std::vector<double> bar(pbar.data(), pbar.data() + pbar.size());
-  check(IDASetSensParams(m.mem, nullptr, bar.data(), nullptr), "IDASetSensParams");
+  check_sundials(IDASetSensParams(m.mem, nullptr, bar.data(), nullptr), "IDASetSensParams");
   // IDAS's estimated tolerances (IDASensEEtolerances) would pass pbar·sᵢ through
   // error_weights, which measures positions from the rest shape. These are the same
   // weights, pbar/(rtol·pbar|s| + atol), without that origin: sensitivities are
@@ -334,8 +308,8 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
   for (int i = 0; i < m.ns; ++i) N_VScale(1.0 / pbar[i], m.atol, atol_s[i]);
   const int flag = IDASensSVtolerances(m.mem, m.opt.rtol, atol_s);
   N_VDestroyVectorArray(atol_s, m.ns);
-  check(flag, "IDASensSVtolerances");
-  check(IDASetSensErrCon(m.mem, error_control ? SUNTRUE : SUNFALSE), "IDASetSensErrCon");
+  check_sundials(flag, "IDASensSVtolerances");
+  check_sundials(IDASetSensErrCon(m.mem, error_control ? SUNTRUE : SUNFALSE), "IDASetSensErrCon");
 }
 
 Eigen::MatrixXd IdasIntegrator::state_sensitivities() const {
@@ -357,10 +331,10 @@ void IdasIntegrator::add_quadrature_sensitivities(QuadratureSensitivityRhs rhs) 
   m.quad_sens_rhs = std::move(rhs);
   m.qS = N_VCloneVectorArray(m.ns, m.q);
   for (int i = 0; i < m.ns; ++i) N_VConst(0.0, m.qS[i]);
-  check(IDAQuadSensInit(m.mem, quadrature_sensitivity_fn, m.qS), "IDAQuadSensInit");
+  check_sundials(IDAQuadSensInit(m.mem, quadrature_sensitivity_fn, m.qS), "IDAQuadSensInit");
   if (m.quad_error_control) {
-    check(IDAQuadSensEEtolerances(m.mem), "IDAQuadSensEEtolerances");
-    check(IDASetQuadSensErrCon(m.mem, SUNTRUE), "IDASetQuadSensErrCon");
+    check_sundials(IDAQuadSensEEtolerances(m.mem), "IDAQuadSensEEtolerances");
+    check_sundials(IDASetQuadSensErrCon(m.mem, SUNTRUE), "IDASetQuadSensErrCon");
   }
 }
 
@@ -377,7 +351,7 @@ Eigen::MatrixXd IdasIntegrator::quadrature_sensitivities() const {
 }
 
 void IdasIntegrator::record_checkpoints(long steps) {
-  check(IDAAdjInit(impl_->mem, steps, IDA_HERMITE), "IDAAdjInit");
+  check_sundials(IDAAdjInit(impl_->mem, steps, IDA_HERMITE), "IDAAdjInit");
   impl_->checkpointing = true;
 }
 
@@ -396,12 +370,12 @@ double IdasIntegrator::solver_time() const {
 bool IdasIntegrator::advance_to(double tout, double t_stop, long step_budget) {
   Impl& m = *impl_;
   const int n = m.n;
-  check(IDASetStopTime(m.mem, t_stop), "IDASetStopTime");
+  check_sundials(IDASetStopTime(m.mem, t_stop), "IDASetStopTime");
   if (!m.order_set) {
     // Not before the quadratures are added: IDAQuadInit sizes its history to the
     // maximum order at that call, and IDAS 6's adjoint checkpoints copy kk + 2
     // quadrature history vectors whatever it is (past the end below order 4).
-    check(IDASetMaxOrd(m.mem, m.opt.max_order), "IDASetMaxOrd");
+    check_sundials(IDASetMaxOrd(m.mem, m.opt.max_order), "IDASetMaxOrd");
     m.order_set = true;
   }
   error_.clear();

@@ -36,6 +36,8 @@ struct IntegratorStats {
   std::array<long, 6> order_histogram{};  // steps taken at order 1..5 (index = order)
   double jacobian_seconds = 0, setup_seconds = 0, solve_seconds = 0, residual_seconds = 0;
   double mean_order() const;
+  /// Adds another run's counters and times (passes of one evaluation).
+  IntegratorStats& operator+=(const IntegratorStats& o);
 };
 
 /// Integrand of quadratures ∫ q(t, y) dt carried along the forward solve.
@@ -81,12 +83,9 @@ class IdasIntegrator {
   /// Quadrature sensitivities at time(): nq × ns.
   Eigen::MatrixXd quadrature_sensitivities() const;
 
-  /// Records IDAS adjoint checkpoints every `steps` steps (Hermite interpolation);
-  /// after the forward solve, idas_memory() is ready for IDACreateB.
+  /// Records IDAS adjoint checkpoints every `steps` steps (Hermite interpolation):
+  /// after the forward solve, an IdasBackward can be solved over them.
   void record_checkpoints(long steps);
-  void* idas_memory() const;
-  /// The SUNDIALS context, for vectors of a backward problem.
-  void* sundials_context() const;
 
   /// Integrates until `tout` (never past `t_stop`), then interpolates the state at
   /// tout. Returns false on solver failure; error() then says why and at which time.
@@ -112,6 +111,9 @@ class IdasIntegrator {
   struct Impl;
 
  private:
+  friend class IdasBackward;  // solves over this integrator's IDAS memory
+  void* idas_memory() const;
+  void* sundials_context() const;
   std::unique_ptr<Impl> impl_;
   double t_ = 0;
   Eigen::VectorXd x_, v_;
