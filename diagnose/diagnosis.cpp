@@ -383,6 +383,13 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         fmt::format("{}: a diagnosis needs a fit section (the nominal parameters to fit "
                     "and, optionally, fit.experiments)",
                     d.scenario));
+  // The diagnosis explains a misfit to measurements; a target shape has no noise to
+  // weigh it by (and its Gauss–Newton system is refused).
+  if (!nominal.fit.objective.targets.empty())
+    throw Error(fmt::format(
+        "{}:{}: fit.objective.targets: a diagnosis explains the gap to captured tracks; shape "
+        "targets are design goals, not measurements (fit them with kelvin fit)",
+        d.scenario, nominal.fit.objective.targets.front().line));
   const BodyAxis axis = body_axis(nominal);
   const auto wanted = [&](const Candidate& c) {
     const auto listed = [&](const std::vector<std::string>& ids) {

@@ -224,6 +224,18 @@ TEST(ShapeTarget, TheBundledExampleFlattensTheBottomFace) {
   EXPECT_LT(after, 0.2);
 }
 
+// A diagnosis explains a misfit to measurements: it refuses targets at once, before
+// any fit, naming the line of the first one.
+TEST(ShapeTarget, TheDiagnosisRefusesShapeTargets) {
+  const fs::path out = test::scratch("shape-target-diagnose");
+  const test::CliRun r = test::run_kelvin(
+      "diagnose " KELVIN_SOURCE_DIR "/yaml/examples/target-shape.yaml -o " + out.string());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("target-shape.yaml:34: fit.objective.targets: a diagnosis explains"),
+            std::string::npos)
+      << r.out;
+}
+
 // Each mistake is named with the file, line and key.
 TEST(ShapeTarget, BadTargetsAreRefusedWithTheKeyAndWhy) {
   const fs::path dir = test::scratch("shape-target-bad");
