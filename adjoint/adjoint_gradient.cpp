@@ -12,7 +12,7 @@
 // continuous across the boundary (F_y' is the identity/mass, so λ(T_k⁻) = λ(T_k⁺))
 // except at a shape target's time, where Φ_k(x(T_k)) makes λx jump by ∂Φ_k/∂x.
 // Segments take the place of IDAS's own checkpoints within a run (see below); their
-// length is fixed per experiment (Experiment::segment_length).
+// length is fixed per experiment (EvaluationPlan::segment_length).
 // The forward model restarts at the same boundaries in every pass, so the gradient
 // is exact for the trajectory whose Φ is reported.
 #include <fmt/format.h>
@@ -38,9 +38,9 @@ struct Backward {
   SchurSolver schur{dae};
   double cached_t = NAN;
   Eigen::VectorXd cached_y, gx;
-  mutable Eigen::VectorXd kt, dt;  // Kᵀλv, Dᵀλv
-  mutable ElementSlots slots;      // transpose_multiply's workspace
-  Experiment::AdjointPeaks peak;   // of |λx|, |λv| at the steps taken
+  mutable Eigen::VectorXd kt, dt;     // Kᵀλv, Dᵀλv
+  mutable ElementSlots slots;         // transpose_multiply's workspace
+  EvaluationPlan::AdjointPeaks peak;  // of |λx|, |λv| at the steps taken
   Eigen::Matrix3Xd x, v;
 
   explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model), kt(r.n), dt(r.n) {}
@@ -125,7 +125,7 @@ bool beyond(double a, double b) {
 /// raises `seen` to the peaks of |λx|, |λv| it met.
 bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, double T1,
                       Eigen::VectorXd& lambda, Eigen::VectorXd& dphi_dp,
-                      Experiment::AdjointPeaks& seen, ExperimentResult& result) {
+                      EvaluationPlan::AdjointPeaks& seen, ExperimentResult& result) {
   const int n = run.n;
   Backward b(run);
   BackwardProblem problem;
@@ -274,7 +274,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
 
   Eigen::VectorXd dphi_dp = Eigen::VectorXd::Zero(run.map.size());
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
-  Experiment::AdjointPeaks seen;
+  EvaluationPlan::AdjointPeaks seen;
   Eigen::VectorXd x, v;
   for (int k = segments - 1; k >= 0; --k) {
     boundaries.get(k, x, v);
@@ -289,8 +289,8 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
     // the stepping: 2047 instead of 2176 steps on test_gradients' bar), so the room
     // grows by a quarter over its count.
     long points = budget;
-    if (segments == 1 && run.ex.planned_steps() > 0)
-      points = std::min(budget, run.ex.planned_steps() * 5 / 4 + 8);
+    if (segments == 1 && run.plan.planned_steps() > 0)
+      points = std::min(budget, run.plan.planned_steps() * 5 / 4 + 8);
     else if (k + 1 < segments)
       points = segment_steps[k] + 8;
     else if (!segment_steps.empty())
@@ -314,7 +314,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
       points = std::max(points, steps) * 5 / 4 + 8;
     }
     if (!ok) return;
-    if (segments == 1) run.ex.note_steps(integ->stats().steps);
+    if (segments == 1) run.plan.note_steps(integ->stats().steps);
     if (k == segments - 1) {
       run.add_quadratures(*integ, result);
       run.add_targets(T[k + 1], integ->positions(), result);
@@ -327,9 +327,9 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
   // The peaks are kept while they predict λ within kLooseTolerance, so that
   // evaluating one point twice gives one gradient.
   const auto off = [](double met, double ref) { return beyond(met, ref) || beyond(ref, met); };
-  if (run.ex.adjoint_peaks().x == 0 || run.lambda_refs_missed || off(seen.x, run.lambda_x_ref) ||
+  if (run.plan.adjoint_peaks().x == 0 || run.lambda_refs_missed || off(seen.x, run.lambda_x_ref) ||
       off(seen.v, run.lambda_v_ref))
-    run.ex.note_adjoint_peaks({seen.x / run.misfit_rms, seen.v / run.misfit_rms});
+    run.plan.note_adjoint_peaks({seen.x / run.misfit_rms, seen.v / run.misfit_rms});
 
   run.add_target_gradient(T[0], run.x0, lambda.data());
   if (run.static_initial()) {

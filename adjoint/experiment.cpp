@@ -72,12 +72,12 @@ void Experiment::apply(const ParameterMap& map, const Eigen::VectorXd& p) {
 }
 
 ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
-                                      const GradientOptions& options) {
+                                      const GradientOptions& options, EvaluationPlan& plan) {
   const auto start = std::chrono::steady_clock::now();
   ExperimentResult result;
   apply(map, p);
   try {
-    ExperimentRun run(*this, map, p, options);
+    ExperimentRun run(*this, plan, map, p, options);
     switch (options.method) {
       case GradientMethod::kNone:
         evaluate_objective(run, result);
@@ -104,9 +104,10 @@ ExperimentResult Experiment::evaluate(const ParameterMap& map, const Eigen::Vect
   return result;
 }
 
-ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::VectorXd& params,
-                             const GradientOptions& o)
+ExperimentRun::ExperimentRun(Experiment& e, EvaluationPlan& pl, const ParameterMap& m,
+                             const Eigen::VectorXd& params, const GradientOptions& o)
     : ex(e),
+      plan(pl),
       model(e.model()),
       objective(e.objective()),
       map(m),
@@ -130,28 +131,8 @@ ExperimentRun::ExperimentRun(Experiment& e, const ParameterMap& m, const Eigen::
           static_cast<int>(dependencies.size());
     }
   initial_state(ex.scenario(), model, x0, v0);
-  if (iopt.max_order <= 0) iopt.max_order = ex.order_cap(iopt, t_end, x0, v0, o.tolerance_scale);
-}
-
-int Experiment::order_cap(const IntegratorOptions& options, double t_end, const Eigen::VectorXd& x0,
-                          const Eigen::VectorXd& v0, double tolerance_scale) {
-  if (order_choice_.max_order == 0 || order_scale_ != tolerance_scale) {
-    order_choice_ = choose_max_order(*model_, options, 0.0, t_end, x0, v0);
-    order_scale_ = tolerance_scale;
-  }
-  return order_choice_.max_order;
-}
-
-bool Experiment::plan_segments(long steps, long budget, double duration, double tolerance_scale) {
-  planned_steps_ = steps;
-  planned_scale_ = tolerance_scale;
-  if (steps < budget) {
-    segment_ = 0;
-    return false;
-  }
-  const long per_segment = std::max(budget / 2, 1L);
-  segment_ = duration / static_cast<double>((steps + per_segment - 1) / per_segment);
-  return true;
+  if (iopt.max_order <= 0)
+    iopt.max_order = plan.order_cap(model, iopt, t_end, x0, v0, o.tolerance_scale);
 }
 
 namespace {
@@ -172,7 +153,7 @@ std::vector<double> ExperimentRun::fixed_times() const {
 
 std::vector<double> ExperimentRun::boundaries() const {
   std::vector<double> b = fixed_times();
-  if (const double length = ex.segment_length(opt.segment); length > 0) {
+  if (const double length = plan.segment_length(opt.segment); length > 0) {
     const std::vector<double> fixed = b;
     const int segments = std::max(1, static_cast<int>(std::ceil((t_end - t0) / length - 1e-9)));
     for (int k = 1; k < segments; ++k) {
@@ -381,7 +362,7 @@ void ExperimentRun::factor_static_stiffness() {
 void ExperimentRun::set_adjoint_scale(const ExperimentResult& result) {
   const double duration = t_end - t0;
   misfit_rms = std::max(ex.rms(result.phi_per_marker, result.phi_targets), iopt.atol);
-  const Experiment::AdjointPeaks& peaks = ex.adjoint_peaks();
+  const EvaluationPlan::AdjointPeaks& peaks = plan.adjoint_peaks();
   if (peaks.x > 0 && peaks.v > 0) {
     lambda_x_ref = peaks.x * misfit_rms;
     lambda_v_ref = peaks.v * misfit_rms;
@@ -403,7 +384,8 @@ bool ExperimentRun::plan_segments(ExperimentResult& plain) {
   plain.phi_per_marker.setZero(objective.num_markers());
   const std::vector<double> T = fixed_times();
   if (!integrate_segments(T, static_cast<int>(T.size()) - 1, plain)) return false;
-  ex.plan_segments(plain.forward_stats.steps, checkpoint_budget(), t_end - t0, opt.tolerance_scale);
+  plan.plan_segments(plain.forward_stats.steps, checkpoint_budget(), t_end - t0,
+                     opt.tolerance_scale);
   plain.ok = true;
   return true;
 }

@@ -10,6 +10,7 @@
 #include <memory>
 #include <string>
 
+#include "adjoint/evaluation_plan.hpp"
 #include "adjoint/marker_objective.hpp"
 #include "adjoint/parameter_map.hpp"
 #include "adjoint/shape_target.hpp"
@@ -28,7 +29,7 @@ const char* to_string(GradientMethod m);
 struct GradientOptions {
   GradientMethod method = GradientMethod::kAdjoint;
   /// Most IDAS steps whose Hermite points one adjoint segment stores; 0 = default.
-  /// Automatic segments are sized to half of it (see Experiment::plan_segments).
+  /// Automatic segments are sized to half of it (see EvaluationPlan::plan_segments).
   long checkpoint_steps = 0;
   double segment = 0;          // simulated seconds per adjoint segment; 0 = automatic
   double tolerance_scale = 1;  // multiplies the scenario's rtol and atol (the fit's stages)
@@ -96,62 +97,17 @@ class Experiment {
   void apply(const ParameterMap& map, const Eigen::VectorXd& p);
 
   /// Φ and, on request, dΦ/dp at the map's parameters p (applied to the model
-  /// first). A failing simulation (inversion, solver failure) is reported in the
-  /// result, not thrown: a fitter backs off from such trial parameters.
+  /// first), integrated as `plan` says (and planned there on its first use). A
+  /// failing simulation (inversion, solver failure) is reported in the result, not
+  /// thrown: a fitter backs off from such trial parameters.
   ExperimentResult evaluate(const ParameterMap& map, const Eigen::VectorXd& p,
-                            const GradientOptions& options);
-
-  /// Simulated seconds per segment, the same for every evaluation of this
-  /// experiment: boundaries that moved with the parameters would make Φ rough, and
-  /// a fit would stall on it. `option` > 0 is used as given; 0 means automatic,
-  /// chosen at the first evaluation that completes (plan_segments) at each
-  /// tolerance scale (a fit that tightens its tolerances takes more steps, so it
-  /// plans again). Returns 0 for one segment, and while the choice is still open.
-  double segment_length(double option) const { return option > 0 ? option : segment_; }
-  bool segments_planned(double option, double tolerance_scale) const {
-    return option > 0 || (segment_ >= 0 && tolerance_scale == planned_scale_);
-  }
-  /// Fixes the automatic plan after an unsegmented run of `steps` steps over
-  /// `duration` at `tolerance_scale`: one segment if the run fits the checkpoint
-  /// budget, otherwise equal segments of about half the budget each (the margin
-  /// lets trial parameters that need more steps still fit). True when the run must
-  /// be redone in segments.
-  bool plan_segments(long steps, long budget, double duration, double tolerance_scale);
-  /// Steps of the planning run (0 before it), raised by later one-segment runs
-  /// that took more (note_steps): a one-segment adjoint reserves room for about
-  /// these, not for its whole budget.
-  long planned_steps() const { return planned_steps_; }
-  void note_steps(long steps) { planned_steps_ = std::max(planned_steps_, steps); }
-
-  /// The BDF order cap for `solver.max_order: auto` at `tolerance_scale`: probed
-  /// (choose_max_order) by the first run at each scale and kept, so that every
-  /// evaluation at one scale steps alike, as the segment plan does.
-  int order_cap(const IntegratorOptions& options, double t_end, const Eigen::VectorXd& x0,
-                const Eigen::VectorXd& v0, double tolerance_scale);
-  /// The last probe's outcome (max_order 0 before any).
-  const OrderChoice& order_choice() const { return order_choice_; }
-
-  /// Peaks of |λx| and |λv| per unit RMS misfit met by an adjoint pass (0 before
-  /// one), renewed when a pass meets λ they mispredict. λ is linear in the misfit, so
-  /// later passes set their absolute tolerances from these
-  /// (ExperimentRun::set_adjoint_scale) instead of from a guess.
-  struct AdjointPeaks {
-    double x = 0, v = 0;
-  };
-  const AdjointPeaks& adjoint_peaks() const { return adjoint_peaks_; }
-  void note_adjoint_peaks(const AdjointPeaks& per_rms) { adjoint_peaks_ = per_rms; }
+                            const GradientOptions& options, EvaluationPlan& plan);
 
  private:
   const Scenario& scenario_;
   std::unique_ptr<FemModel> model_;
   MarkerObjective objective_;
   std::vector<ShapeTarget> targets_;
-  double segment_ = -1;       // automatic segment length; < 0 until planned
-  double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
-  long planned_steps_ = 0;
-  OrderChoice order_choice_{0};
-  double order_scale_ = 0;  // the tolerance scale order_choice_ was probed at
-  AdjointPeaks adjoint_peaks_;
 };
 
 }  // namespace kelvin

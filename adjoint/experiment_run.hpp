@@ -13,10 +13,11 @@
 namespace kelvin {
 
 struct ExperimentRun {
-  ExperimentRun(Experiment& ex, const ParameterMap& map, const Eigen::VectorXd& p,
-                const GradientOptions& opt);
+  ExperimentRun(Experiment& ex, EvaluationPlan& plan, const ParameterMap& map,
+                const Eigen::VectorXd& p, const GradientOptions& opt);
 
   Experiment& ex;
+  EvaluationPlan& plan;
   FemModel& model;
   const MarkerObjective& objective;
   const ParameterMap& map;
@@ -53,10 +54,10 @@ struct ExperimentRun {
   /// Most steps one segment's Hermite points may hold (GradientOptions::checkpoint_steps).
   long checkpoint_budget() const;
   /// True when this evaluation decides the experiment's automatic segment plan.
-  bool planning() const { return !ex.segments_planned(opt.segment, opt.tolerance_scale); }
+  bool planning() const { return !plan.segments_planned(opt.segment, opt.tolerance_scale); }
   /// Decides it: one plain run over the whole duration (no Hermite points, so no
   /// memory that grows with the duration) into `plain` (Φ, steps), whose step
-  /// count Experiment::plan_segments turns into segments. False (with
+  /// count EvaluationPlan::plan_segments turns into segments. False (with
   /// plain.error) when that run fails.
   bool plan_segments(ExperimentResult& plain);
 

@@ -65,6 +65,7 @@ FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> s
         "with observed positions (probing.measurements[].observed)",
         scenario.path));
   weigh_static_terms(scenario);
+  plans_.resize(experiments_.size());
   map_ = std::make_unique<ParameterMap>(
       specs, scenario, model(),
       experiments_.empty() ? std::vector<std::string>{} : experiments_[0]->objective().names());
@@ -164,8 +165,9 @@ Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions&
   ev.ok = true;
   double weighted_time = 0;
   if (options.method != GradientMethod::kNone) ev.gradient.setZero(map_->size());
-  for (auto& ex : experiments_) {
-    ExperimentResult r = ex->evaluate(*map_, p, options);
+  for (size_t i = 0; i < experiments_.size(); ++i) {
+    const auto& ex = experiments_[i];
+    ExperimentResult r = ex->evaluate(*map_, p, options, plans_[i]);
     if (!r.ok && ev.ok) {
       ev.ok = false;
       // Name the experiment unless the message already does (static-state errors).

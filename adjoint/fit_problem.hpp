@@ -55,6 +55,9 @@ class FitProblem {
   const Mesh& mesh() const { return scenario_->mesh; }
   int num_experiments() const { return static_cast<int>(experiments_.size()); }
   Experiment& experiment(int i) { return *experiments_[i]; }
+  /// How experiment i's evaluations integrate (EvaluationPlan): every evaluation of
+  /// this problem, and every sampling of its tracks, goes by it.
+  EvaluationPlan& plan(int i) { return plans_[i]; }
   int num_static_terms() const { return static_cast<int>(statics_.size()); }
   StaticTerm& static_term(int i) { return *statics_[i]; }
 
@@ -64,6 +67,7 @@ class FitProblem {
   const Scenario* scenario_ = nullptr;
   std::vector<std::unique_ptr<Scenario>> owned_;  // experiments loaded here
   std::vector<std::unique_ptr<Experiment>> experiments_;
+  std::vector<EvaluationPlan> plans_;                     // one per experiment
   std::vector<std::unique_ptr<ProbeExperiment>> probes_;  // the static terms' models
   std::vector<std::unique_ptr<StaticTerm>> statics_;
   std::unique_ptr<ParameterMap> map_;

@@ -39,10 +39,12 @@ Eigen::MatrixXd residual_sensitivities(const FemModel& model, const MarkerObject
 
 }  // namespace
 
-MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& map,
-                                  const Eigen::VectorXd& p, const std::vector<double>& times,
-                                  bool with_sensitivities, const std::atomic<bool>* interrupt) {
+MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::VectorXd& p,
+                                  const std::vector<double>& times, bool with_sensitivities,
+                                  const std::atomic<bool>* interrupt) {
   MarkerTrajectory out;
+  Experiment& experiment = problem.experiment(index);
+  const ParameterMap& map = problem.map();
   const Scenario& scenario = experiment.scenario();
   const auto& markers = scenario.markers.embedded;
   FemModel& model = experiment.model();
@@ -52,7 +54,7 @@ MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& ma
   experiment.apply(map, p);
   const MarkerObjective& objective = experiment.objective();
   try {
-    ExperimentRun run(experiment, map, p, options);
+    ExperimentRun run(experiment, problem.plan(index), map, p, options);
     for (size_t k = 0; k < times.size(); ++k)
       if (times[k] < run.t0 || times[k] > run.t_end || (k > 0 && times[k] < times[k - 1])) {
         out.error = fmt::format(

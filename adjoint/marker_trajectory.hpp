@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "adjoint/experiment.hpp"
+#include "adjoint/fit_problem.hpp"
 #include "adjoint/parameter_map.hpp"
 
 namespace kelvin {
@@ -27,11 +28,11 @@ struct MarkerTrajectory {
   IntegratorStats stats;  // of the run that made the samples
 };
 
-/// Simulates `experiment` at parameters p of `map` (applied to it first)
-/// and samples the embedded markers at `times` (ascending, within the run).
-MarkerTrajectory simulate_markers(Experiment& experiment, const ParameterMap& map,
-                                  const Eigen::VectorXd& p, const std::vector<double>& times,
-                                  bool with_sensitivities,
+/// Simulates experiment `index` of `problem` at parameters p of its map (applied
+/// first), integrated as the problem's evaluations are (FitProblem::plan), and
+/// samples the embedded markers at `times` (ascending, within the run).
+MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::VectorXd& p,
+                                  const std::vector<double>& times, bool with_sensitivities,
                                   const std::atomic<bool>* interrupt = nullptr);
 
 }  // namespace kelvin

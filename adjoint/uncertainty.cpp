@@ -64,7 +64,7 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
     for (double t : obs.times)
       if (t >= begin && t <= end) times.push_back(t);
     if (times.empty()) continue;
-    const MarkerTrajectory traj = simulate_markers(ex, map, p, times, with_jacobian, interrupt);
+    const MarkerTrajectory traj = simulate_markers(problem, e, p, times, with_jacobian, interrupt);
     if (!traj.ok) {
       g.error = fmt::format("{}: {}", s.path, traj.error);
       return g;

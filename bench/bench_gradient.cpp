@@ -110,7 +110,7 @@ Timing time_evaluation(FitProblem& problem, GradientMethod method, int repeat,
 
 /// Peak resident memory and wall time of one evaluation, run in a child process.
 /// `evaluations` > 1 times the last one (the first of an experiment with automatic
-/// segments also plans them, see Experiment::plan_segments).
+/// segments also plans them, see EvaluationPlan::plan_segments).
 struct Footprint {
   double mib = 0, seconds = 0;
   long steps = -1;

@@ -98,8 +98,7 @@ struct KelvinSetup {
   MarkerTrajectory tracks;  // sampled at the case's frames by the first run
   KelvinSetup(const Case& c, const SolverSpec& solver) : scenario(with_solver(c.scenario, solver)) {
     problem = std::make_unique<FitProblem>(scenario, scenario.fit.parameters);
-    tracks = simulate_markers(problem->experiment(0), problem->map(), problem->map().initial(),
-                              c.frames, false);
+    tracks = simulate_markers(*problem, 0, problem->map().initial(), c.frames, false);
   }
   Eigen::VectorXd p() const { return problem->map().initial(); }
 };
@@ -115,7 +114,7 @@ Run kelvin_forward(const Case& c, const SolverSpec& solver,
   KelvinSetup setup(c, solver);
   r.ok = setup.tracks.ok;
   r.error = setup.tracks.error;
-  const OrderChoice& choice = setup.problem->experiment(0).order_choice();
+  const OrderChoice& choice = setup.problem->plan(0).order_choice();
   r.order = solver.max_order > 0 ? solver.max_order : choice.max_order;
   for (long steps : choice.steps) r.probe_steps += std::abs(steps);
   r.steps = setup.tracks.stats.steps;
@@ -156,7 +155,8 @@ Run baseline(const Case& c, double h, const std::vector<Eigen::Matrix3Xd>& ref, 
   const Eigen::VectorXd p = setup.problem->map().initial();
   setup.problem->map().apply(p, setup.problem->experiment(0).model());
   GradientOptions opt;
-  ExperimentRun run(setup.problem->experiment(0), setup.problem->map(), p, opt);
+  ExperimentRun run(setup.problem->experiment(0), setup.problem->plan(0), setup.problem->map(), p,
+                    opt);
   bench::Bdf2Result b = bench::bdf2_run(run, h, c.frames, adjoint);
   r.wall = since(start);
   r.ok = b.ok;

@@ -76,10 +76,8 @@ bool track_plot(FitProblem& problem, int k, const std::string& marker, const Fit
   }
   if (frames.empty()) return false;
   for (int f : frames) plot.t.push_back(tracks.times[f]);
-  const MarkerTrajectory before =
-      simulate_markers(ex, problem.map(), s.start, plot.t, false, interrupt);
-  const MarkerTrajectory after =
-      simulate_markers(ex, problem.map(), s.best, plot.t, false, interrupt);
+  const MarkerTrajectory before = simulate_markers(problem, k, s.start, plot.t, false, interrupt);
+  const MarkerTrajectory after = simulate_markers(problem, k, s.best, plot.t, false, interrupt);
   if (!before.ok || !after.ok) return false;
   const int m = static_cast<int>(frames.size());
   plot.experiment = ex.scenario().name;

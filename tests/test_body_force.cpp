@@ -78,8 +78,7 @@ TEST(BodyForce, AFieldThatMadeTheTracksIsRecoveredFromZero) {
   Eigen::VectorXd p_true(8);
   p_true << 0.8, -1.5, 1.2, 0.4, -0.6, 0.9, 0.3, -1.1;  // m/s² at 0.02 … 0.08 s
   const MarkerTracks frames = read_marker_tracks(nominal);
-  const MarkerTrajectory tr =
-      simulate_markers(truth.experiment(0), truth.map(), p_true, frames.times, false);
+  const MarkerTrajectory tr = simulate_markers(truth, 0, p_true, frames.times, false);
   ASSERT_TRUE(tr.ok) << tr.error;
   std::string csv = "t";
   for (const auto& n : frames.names) csv += "," + n + "_x," + n + "_y," + n + "_z";

@@ -341,7 +341,9 @@ TEST(Gradients, OccludedMarkerDropsExactlyItsIntervals) {
     spec.window_begin = t0;
     spec.window_end = t1;
     FitProblem problem(s, {param("elastic.mu")});
-    ExperimentResult r = Experiment(s, spec).evaluate(problem.map(), problem.map().initial(), none);
+    EvaluationPlan plan;
+    ExperimentResult r =
+        Experiment(s, spec).evaluate(problem.map(), problem.map().initial(), none, plan);
     EXPECT_TRUE(r.ok) << r.error;
     return r.phi;
   };

@@ -89,8 +89,7 @@ TEST_F(MarkerTrajectoryTest, PositionsMatchTheSimulationsMarkerCsv) {
   ASSERT_EQ(truth.names.size(), s.markers.embedded.size());
   const Eigen::VectorXd p = problem.map().initial();
   for (const bool sensitivities : {false, true}) {
-    const MarkerTrajectory traj =
-        simulate_markers(problem.experiment(0), problem.map(), p, truth.times, sensitivities);
+    const MarkerTrajectory traj = simulate_markers(problem, 0, p, truth.times, sensitivities);
     ASSERT_TRUE(traj.ok) << traj.error;
     ASSERT_EQ(traj.positions.size(), truth.times.size());
     EXPECT_EQ(traj.residual_sensitivities.size(), sensitivities ? truth.times.size() : 0u);
@@ -119,7 +118,7 @@ TEST_F(MarkerTrajectoryTest, SensitivitiesMatchCentralDifferences) {
   const Eigen::VectorXd p = map.initial();
   // t = 0 is the static state (x₀_p = −K₀⁻¹ ∂R/∂p); the others lie between steps.
   const std::vector<double> times{0.0, 0.0137, 0.0371, 0.06};
-  const MarkerTrajectory traj = simulate_markers(problem.experiment(0), map, p, times, true);
+  const MarkerTrajectory traj = simulate_markers(problem, 0, p, times, true);
   ASSERT_TRUE(traj.ok) << traj.error;
   // Every marker is observed, in the embedding's order: residual rows are marker rows.
   ASSERT_EQ(problem.experiment(0).objective().names().size(), s.markers.embedded.size());
@@ -134,8 +133,8 @@ TEST_F(MarkerTrajectoryTest, SensitivitiesMatchCentralDifferences) {
       Eigen::VectorXd pp = p, pm = p;
       pp[j] += h;
       pm[j] -= h;
-      const MarkerTrajectory plus = simulate_markers(problem.experiment(0), map, pp, times, false);
-      const MarkerTrajectory minus = simulate_markers(problem.experiment(0), map, pm, times, false);
+      const MarkerTrajectory plus = simulate_markers(problem, 0, pp, times, false);
+      const MarkerTrajectory minus = simulate_markers(problem, 0, pm, times, false);
       EXPECT_TRUE(plus.ok && minus.ok) << plus.error << minus.error;
       std::vector<Eigen::Matrix3Xd> d;
       for (size_t k = 0; k < times.size(); ++k)
@@ -172,7 +171,7 @@ TEST_F(MarkerTrajectoryTest, ObservationColumnsMatchCentralDifferences) {
   Eigen::VectorXd p = map.initial();
   p.tail(10) << 0.004, 1e-3, -2e-3, 5e-4, 0.02, -0.01, 0.03, 1e-3, 2e-3, -1e-3;
   const std::vector<double> times{0.0137, 0.0371, 0.06};
-  const MarkerTrajectory traj = simulate_markers(problem.experiment(0), map, p, times, true);
+  const MarkerTrajectory traj = simulate_markers(problem, 0, p, times, true);
   ASSERT_TRUE(traj.ok) << traj.error;
   for (int j = 1; j < map.size(); ++j) {
     // The clock's step is set by the tracks' curvature, the others by round-off.
@@ -180,8 +179,8 @@ TEST_F(MarkerTrajectoryTest, ObservationColumnsMatchCentralDifferences) {
     Eigen::VectorXd pp = p, pm = p;
     pp[j] += h;
     pm[j] -= h;
-    const MarkerTrajectory plus = simulate_markers(problem.experiment(0), map, pp, times, true);
-    const MarkerTrajectory minus = simulate_markers(problem.experiment(0), map, pm, times, true);
+    const MarkerTrajectory plus = simulate_markers(problem, 0, pp, times, true);
+    const MarkerTrajectory minus = simulate_markers(problem, 0, pm, times, true);
     ASSERT_TRUE(plus.ok && minus.ok);
     double error = 0, norm = 0;
     for (size_t k = 0; k < times.size(); ++k) {
@@ -285,14 +284,12 @@ TEST_F(MarkerTrajectoryTest, FailuresAreReportedNotThrown) {
   FitProblem problem(s, params({"elastic.mu"}));
   const Eigen::VectorXd p = problem.map().initial();
   std::atomic<bool> interrupt{true};
-  const MarkerTrajectory stopped =
-      simulate_markers(problem.experiment(0), problem.map(), p, {0.0, 0.05}, true, &interrupt);
+  const MarkerTrajectory stopped = simulate_markers(problem, 0, p, {0.0, 0.05}, true, &interrupt);
   EXPECT_FALSE(stopped.ok);
   EXPECT_NE(stopped.error.find("interrupted at t = 0"), std::string::npos) << stopped.error;
   EXPECT_EQ(stopped.positions.size(), 1u);  // the sample before the interrupt is kept
 
-  const MarkerTrajectory late =
-      simulate_markers(problem.experiment(0), problem.map(), p, {0.05, 0.2}, false);
+  const MarkerTrajectory late = simulate_markers(problem, 0, p, {0.05, 0.2}, false);
   EXPECT_FALSE(late.ok);
   EXPECT_NE(late.error.find("t = 0.2"), std::string::npos) << late.error;
 }

@@ -53,8 +53,7 @@ TipRun run_tip(FitProblem& problem, const Eigen::VectorXd& p) {
   const int markers = static_cast<int>(observed.names.size());
   TipRun r;
   r.times = observed.times;
-  const MarkerTrajectory sim =
-      simulate_markers(problem.experiment(0), problem.map(), p, r.times, false);
+  const MarkerTrajectory sim = simulate_markers(problem, 0, p, r.times, false);
   EXPECT_TRUE(sim.ok) << sim.error;
   if (!sim.ok) return r;
   double sum = 0;
