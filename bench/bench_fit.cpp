@@ -28,7 +28,7 @@
 #include "base/error.hpp"
 #include "bench/bench_bar.hpp"
 #include "bench/foam_cylinder.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "yaml/scenario.hpp"
 #include "yaml/scenario_simulation.hpp"
 

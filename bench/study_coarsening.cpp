@@ -23,7 +23,7 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "base/error.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "yaml/scenario.hpp"
 #include "yaml/scenario_simulation.hpp"
 

@@ -19,8 +19,8 @@
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/heldout_prediction.hpp"
 #include "diagnose/learned_correction.hpp"
-#include "drivers/fit_loop.hpp"
-#include "drivers/fitted_scenario.hpp"
+#include "fit/fit_loop.hpp"
+#include "fit/fitted_scenario.hpp"
 #include "engine/output.hpp"
 
 namespace kelvin {

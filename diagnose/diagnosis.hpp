@@ -30,7 +30,7 @@
 #include "diagnose/noise.hpp"
 #include "diagnose/ranking.hpp"
 #include "diagnose/where.hpp"
-#include "drivers/stiffness_scan.hpp"
+#include "fit/stiffness_scan.hpp"
 
 namespace kelvin {
 

@@ -8,7 +8,7 @@
 #include <iterator>
 #include <map>
 
-#include "drivers/svg_plot.hpp"
+#include "fit/svg_plot.hpp"
 #include "engine/output.hpp"
 
 namespace kelvin {

@@ -8,9 +8,9 @@
 #include <filesystem>
 
 #include "base/error.hpp"
-#include "drivers/body_force_outputs.hpp"
-#include "drivers/fit_loop.hpp"
-#include "drivers/fitted_scenario.hpp"
+#include "fit/body_force_outputs.hpp"
+#include "fit/fit_loop.hpp"
+#include "fit/fitted_scenario.hpp"
 #include "engine/output.hpp"
 #include "yaml/scenario_paths.hpp"
 #include "yaml/yaml_util.hpp"

@@ -9,10 +9,10 @@
 
 #include "base/error.hpp"
 #include "drivers/commands.hpp"
-#include "drivers/fit_loop.hpp"
-#include "drivers/fit_outputs.hpp"
-#include "drivers/fit_state.hpp"
-#include "drivers/stiffness_scan.hpp"
+#include "fit/fit_loop.hpp"
+#include "fit/fit_outputs.hpp"
+#include "fit/fit_state.hpp"
+#include "fit/stiffness_scan.hpp"
 #include "materials/crash_report.hpp"
 #include "yaml/scenario.hpp"
 

@@ -14,6 +14,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
     std::string scenario;
     double end = 0, rtol = 1e-8, atol = 1e-12, tolerance = 1e-5, fd_tolerance = 1e-3;
     double fd_step = GradientCheckOptions{}.fd_step;
+    double taylor_h0 = GradientCheckOptions{}.taylor_h0;
     double segment = 0;
     long checkpoint_steps = 0;
     unsigned seed = 1;
@@ -48,6 +49,13 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
                   "sensitivity)")
       ->capture_default_str()
       ->check(positive_number());
+  cmd->add_option("--taylor-step", args->taylor_h0,
+                  "first step h of the Taylor test along the random direction (halved six "
+                  "times); a direction along which Φ is nearly linear (many per-element "
+                  "parameters at random signs) needs a longer one for its remainder to rise "
+                  "above the integration noise")
+      ->capture_default_str()
+      ->check(positive_number());
   cmd->add_flag("--no-forward", args->no_forward,
                 "skip forward sensitivities (their cost grows with the parameter count)");
   cmd->callback([args, &exit_code] {
@@ -69,6 +77,7 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
     GradientCheckOptions o;
     o.seed = args->seed;
     o.fd_step = args->fd_step;
+    o.taylor_h0 = args->taylor_h0;
     o.forward = !args->no_forward;
     o.adjoint.segment = args->segment;
     o.adjoint.checkpoint_steps = args->checkpoint_steps;

@@ -9,7 +9,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/marker_trajectory.hpp"
 #include "base/error.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "engine/csv.hpp"
 #include "gradient_agreement.hpp"
 #include "test_support.hpp"

@@ -18,8 +18,8 @@
 #include <sstream>
 
 #include "adjoint/uncertainty.hpp"
-#include "drivers/fit_loop.hpp"
-#include "drivers/fit_state.hpp"
+#include "fit/fit_loop.hpp"
+#include "fit/fit_state.hpp"
 #include "engine/csv.hpp"
 #include "test_support.hpp"
 

@@ -9,7 +9,7 @@
 #include <iostream>
 #include <sstream>
 
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "test_support.hpp"
 
 namespace kelvin {

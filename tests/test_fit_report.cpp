@@ -11,9 +11,9 @@
 #include <sstream>
 
 #include "base/error.hpp"
-#include "drivers/fit_report.hpp"
-#include "drivers/fit_state.hpp"
-#include "drivers/svg_plot.hpp"
+#include "fit/fit_report.hpp"
+#include "fit/fit_state.hpp"
+#include "fit/svg_plot.hpp"
 
 namespace fs = std::filesystem;
 using kelvin::svg::Plot;

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "base/error.hpp"
-#include "drivers/fitted_scenario.hpp"
+#include "fit/fitted_scenario.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario_simulation.hpp"
 

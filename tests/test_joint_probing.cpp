@@ -11,7 +11,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
 #include "base/error.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "test_support.hpp"
 
 namespace kelvin {

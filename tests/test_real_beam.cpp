@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "adjoint/marker_trajectory.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {

@@ -10,7 +10,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/score_screening.hpp"
 #include "adjoint/uncertainty.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 #include "engine/csv.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"

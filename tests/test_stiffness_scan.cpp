@@ -1,4 +1,4 @@
-// The stiffness scan before a fit (drivers/stiffness_scan.hpp): it scales only the
+// The stiffness scan before a fit (fit/stiffness_scan.hpp): it scales only the
 // fitted elastic moduli, finds the grid point nearest the truth's scale, and a fit
 // started there recovers the truth.
 #include <gtest/gtest.h>
@@ -8,8 +8,8 @@
 #include <string>
 
 #include "adjoint/fit_problem.hpp"
-#include "drivers/fit_loop.hpp"
-#include "drivers/stiffness_scan.hpp"
+#include "fit/fit_loop.hpp"
+#include "fit/stiffness_scan.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "adjoint/parameter_map.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 
 namespace kelvin {
 

@@ -1,4 +1,4 @@
-#include "drivers/fitted_scenario.hpp"
+#include "fit/fitted_scenario.hpp"
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "adjoint/fit_problem.hpp"
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 
 namespace kelvin {
 

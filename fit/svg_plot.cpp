@@ -1,4 +1,4 @@
-#include "drivers/svg_plot.hpp"
+#include "fit/svg_plot.hpp"
 
 #include <fmt/format.h>
 

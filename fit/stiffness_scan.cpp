@@ -1,4 +1,4 @@
-#include "drivers/stiffness_scan.hpp"
+#include "fit/stiffness_scan.hpp"
 
 #include <fmt/format.h>
 

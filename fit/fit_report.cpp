@@ -1,4 +1,4 @@
-#include "drivers/fit_report.hpp"
+#include "fit/fit_report.hpp"
 
 #include <fmt/format.h>
 
@@ -9,8 +9,8 @@
 #include <limits>
 #include <map>
 
-#include "drivers/svg_plot.hpp"
 #include "engine/output.hpp"
+#include "fit/svg_plot.hpp"
 
 namespace kelvin {
 

@@ -1,4 +1,4 @@
-#include "drivers/body_force_outputs.hpp"
+#include "fit/body_force_outputs.hpp"
 
 #include <fmt/format.h>
 

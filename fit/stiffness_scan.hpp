@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "drivers/fit_loop.hpp"
+#include "fit/fit_loop.hpp"
 
 namespace kelvin {
 

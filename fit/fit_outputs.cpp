@@ -1,4 +1,4 @@
-#include "drivers/fit_outputs.hpp"
+#include "fit/fit_outputs.hpp"
 
 #include <fmt/format.h>
 
@@ -9,10 +9,10 @@
 
 #include "adjoint/marker_trajectory.hpp"
 #include "adjoint/uncertainty.hpp"
-#include "drivers/body_force_outputs.hpp"
-#include "drivers/fit_report.hpp"
-#include "drivers/fitted_scenario.hpp"
 #include "engine/output.hpp"
+#include "fit/body_force_outputs.hpp"
+#include "fit/fit_report.hpp"
+#include "fit/fitted_scenario.hpp"
 
 namespace kelvin {
 namespace {

@@ -1,4 +1,4 @@
-#include "drivers/fit_state.hpp"
+#include "fit/fit_state.hpp"
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>

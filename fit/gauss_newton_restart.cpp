@@ -1,0 +1,44 @@
+#include <cmath>
+
+#include "adjoint/uncertainty.hpp"
+#include "fit/fit_context.hpp"
+
+namespace kelvin::fit_detail {
+
+/// Gauss–Newton preconditioning for a restart of a stalled L-BFGS: in an
+/// ill-conditioned valley (the occluded-bar fit: λ 1.9× off, its gradient 5× below
+/// μ's, Φ's integration noise 1e-3 of the decrease a step could gain) the
+/// restart's steepest-descent step only moves the stiff direction, and the line
+/// search stalls again at every tolerance. With JᵀJ from the marker sensitivities
+/// at the best point (the standard errors' computation, one sensitivity solve),
+/// the fit continues in z, p = p_best + B z with B Bᵀ ∝ (JᵀJ)⁻¹, where the
+/// Gauss–Newton Hessian is a multiple of the identity. B's scale makes L-BFGS's
+/// first step (length ½ along −∇_z, see objective_scale) the Gauss–Newton step
+/// −(1/κ)(JᵀJ)⁻¹∇Φ, κ = 2Φ / ‖r‖² relating Φ's time integral to the sum over
+/// frames. False when JᵀJ is unavailable (too many parameters, singular).
+bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd& gradient) {
+  UncertaintyAtPoint& cache = c.outcome.uncertainty;
+  if (!cache.holds(best)) {
+    cache.value = gauss_newton_uncertainty(c.problem, best, c.options.gradient.interrupt);
+    cache.p = best;
+  }
+  const ParameterUncertainty& u = cache.value;
+  const double phi = c.outcome.best.misfit;
+  const int n = static_cast<int>(best.size());
+  // Any L with L Lᵀ = C = σ̂² (JᵀJ)⁻¹ serves (L-BFGS in z does not see a rotation); a
+  // direction the data barely resolve (V09's λ at 660 Pa beside μ at 1.3e5 Pa) is
+  // scaled at the sensitivities' accuracy rather than refused.
+  if (u.root_inverse.rows() != n || !(phi > 0) || !(u.sigma > 0) || u.observations <= n)
+    return false;
+  const Eigen::MatrixXd L = u.sigma * u.root_inverse;
+  if (!L.allFinite()) return false;
+  // Δp_GN = −(1/κ)(JᵀJ)⁻¹ g = −β C g with β = (N − n) / (2Φ); with B = s L the
+  // step −½ B Lᵀg/|Lᵀg| equals it for s = 2β|Lᵀg|.
+  const double beta = (u.observations - n) / (2 * phi);
+  const double s = 2 * beta * (L.transpose() * gradient).norm();
+  if (!(s > 0) || !std::isfinite(s)) return false;
+  c.basis = s * L;
+  return true;
+}
+
+}  // namespace kelvin::fit_detail
