@@ -50,7 +50,16 @@ Experiment::Experiment(const Scenario& scenario, const ObjectiveSpec& objective)
     : scenario_(scenario),
       model_(build_model(scenario)),
       objective_(make_objective(scenario, objective)) {
-  for (const ShapeTargetSpec& t : objective.targets) targets_.emplace_back(t, scenario.mesh);
+  // A run shortened after loading (gradcheck --end) would leave a target unseen:
+  // Φ without it, and a gradient check that passes on nothing.
+  for (const ShapeTargetSpec& t : objective.targets) {
+    if (t.time > scenario.time.end)
+      throw Error(fmt::format(
+          "{}:{}: fit.objective.targets: '{}' at t = {:g} s lies after the end of the run "
+          "(t = {:g} s)",
+          scenario.path, t.line, t.name, t.time, scenario.time.end));
+    targets_.emplace_back(t, scenario.mesh);
+  }
 }
 
 double Experiment::objective_weight() const {

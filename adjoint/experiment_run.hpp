@@ -39,9 +39,10 @@ struct ExperimentRun {
   /// observation_count, ∫ ∂g/∂θ dt.
   void add_quadratures(const IdasIntegrator& integ, ExperimentResult& result) const;
 
-  /// Times every pass restarts at: t₀, the shape targets' times inside the run, and
-  /// t_end. The adjoint's λx jumps at a target time, and a forward pass that ends a
-  /// segment there reads the state without interpolation.
+  /// t₀, the shape targets' times inside the run, and t_end: the objective and
+  /// adjoint passes restart at these (the adjoint's λx jumps at a target time);
+  /// forward sensitivities, one integrator for the whole run, stop there without a
+  /// restart, so their Φ differs from the others' within the integration tolerance.
   std::vector<double> fixed_times() const;
   /// Segment boundaries t0 = T₀ < … < T_S = t_end: the fixed times and, once the
   /// experiment's automatic plan is made, its equal segments (a boundary close to a

@@ -37,13 +37,13 @@ SplineSlopeTerm::SplineSlopeTerm(const ParameterMap& map, const FemModel& model,
     for (int k = 0; k + 1 < static_cast<int>(params.size()); ++k) {
       // f1 … fK then h1 … hM: a pair within one curve has the same first letter.
       if (params[k].name[0] != params[k + 1].name[0]) continue;
-      Knot a{t, k, -1}, b{t, k + 1, -1};
+      Knot a{t, k, {}}, b{t, k + 1, {}};
       for (int s = 0; s < static_cast<int>(slots.size()); ++s) {
         if (slots[s].term != t) continue;
-        if (slots[s].index == k && a.slot < 0) a.slot = s;
-        if (slots[s].index == k + 1 && b.slot < 0) b.slot = s;
+        if (slots[s].index == k) a.slots.push_back(s);
+        if (slots[s].index == k + 1) b.slots.push_back(s);
       }
-      if (a.slot >= 0 || b.slot >= 0) pairs_.emplace_back(a, b);
+      if (!a.slots.empty() || !b.slots.empty()) pairs_.emplace_back(a, b);
     }
   }
   const int ne = model.mesh().num_tets();
@@ -53,7 +53,9 @@ SplineSlopeTerm::SplineSlopeTerm(const ParameterMap& map, const FemModel& model,
 }
 
 double SplineSlopeTerm::knot(const Knot& k, const Eigen::VectorXd& p, int e) const {
-  return k.slot >= 0 ? map_.element_value(p, k.slot, e) : model_.terms()[k.term].q(k.index, e);
+  // Any block of the knot gives its value (the value block's times the multipliers).
+  return k.slots.empty() ? model_.terms()[k.term].q(k.index, e)
+                         : map_.element_value(p, k.slots.front(), e);
 }
 
 double SplineSlopeTerm::value(const Eigen::VectorXd& p, Eigen::VectorXd* g) const {
@@ -65,13 +67,11 @@ double SplineSlopeTerm::value(const Eigen::VectorXd& p, Eigen::VectorXd* g) cons
       const double w = weight_ * volume_share_[e];
       sum += w * fall * fall;
       if (!g) continue;
-      // d(fall²)/dq_b = 2 fall, d/dq_a = −2 fall.
-      if (b.slot >= 0)
-        map_.for_each_dependency(p, b.slot, e,
-                                 [&](int j, double dq) { (*g)[j] += 2 * w * fall * dq; });
-      if (a.slot >= 0)
-        map_.for_each_dependency(p, a.slot, e,
-                                 [&](int j, double dq) { (*g)[j] -= 2 * w * fall * dq; });
+      // d(fall²)/dq_b = 2 fall, d/dq_a = −2 fall, through every block of each knot.
+      for (int s : b.slots)
+        map_.for_each_dependency(p, s, e, [&](int j, double dq) { (*g)[j] += 2 * w * fall * dq; });
+      for (int s : a.slots)
+        map_.for_each_dependency(p, s, e, [&](int j, double dq) { (*g)[j] -= 2 * w * fall * dq; });
     }
   return sum;
 }

@@ -67,7 +67,7 @@ class SplineSlopeTerm final : public ParameterTerm {
  private:
   struct Knot {
     int term = 0, index = 0;
-    int slot = -1;  // the map's slot when fitted
+    std::vector<int> slots;  // the map's blocks of this knot (a value block, multipliers)
   };
   const ParameterMap& map_;
   const FemModel& model_;

@@ -19,9 +19,9 @@
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/heldout_prediction.hpp"
 #include "diagnose/learned_correction.hpp"
+#include "engine/output.hpp"
 #include "fit/fit_loop.hpp"
 #include "fit/fitted_scenario.hpp"
-#include "engine/output.hpp"
 
 namespace kelvin {
 namespace {
@@ -385,11 +385,16 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                     d.scenario));
   // The diagnosis explains a misfit to measurements; a target shape has no noise to
   // weigh it by (and its Gauss–Newton system is refused).
-  if (!nominal.fit.objective.targets.empty())
-    throw Error(fmt::format(
-        "{}:{}: fit.objective.targets: a diagnosis explains the gap to captured tracks; shape "
-        "targets are design goals, not measurements (fit them with kelvin fit)",
-        d.scenario, nominal.fit.objective.targets.front().line));
+  const auto refuse_targets = [](const Scenario& s) {
+    if (!s.fit.objective.targets.empty())
+      throw Error(fmt::format(
+          "{}:{}: fit.objective.targets: a diagnosis explains the gap to captured tracks; shape "
+          "targets are design goals, not measurements (fit them with kelvin fit)",
+          s.path, s.fit.objective.targets.front().line));
+  };
+  refuse_targets(nominal);
+  for (const auto& file : nominal.fit.experiments)
+    refuse_targets(load_scenario((fs::path(nominal.path).parent_path() / file).string()));
   const BodyAxis axis = body_axis(nominal);
   const auto wanted = [&](const Candidate& c) {
     const auto listed = [&](const std::vector<std::string>& ids) {

@@ -76,6 +76,29 @@ TEST(ParameterTerms, TheSplineSlopeTermPenalisesAFallingStressCurveOnly) {
   EXPECT_EQ(g.norm(), 0.0);
 }
 
+// A knot fitted by two blocks, a global value and a Legendre multiplier along the
+// bar: the penalty's gradient reaches both (central differences).
+TEST(ParameterTerms, TheSplineSlopeGradientReachesEveryBlockOfAKnot) {
+  const fs::path dir = test::scratch("parameter-terms-spline-blocks");
+  const Scenario s = spline_bar(dir);
+  const std::vector<double> knots = SplineMaterial::neo_hookean_values(1e4, 1e4);
+  FitParameterSpec f6 = linear_fit_parameter("elastic.f6", -1e5, 1e5);
+  f6.initial = knots[4] - 100;
+  FitParameterSpec along = linear_fit_parameter("elastic.f6", -5, 5);
+  along.scope = FitParameterSpec::Scope::Legendre;
+  along.legendre_axis = 0;
+  along.legendre_degree = 1;
+  along.initial = 0.2;
+  FitProblem problem(s, {f6, along});
+  const SplineSlopeTerm term(problem.map(), problem.model(), 1e-9);
+  const Eigen::VectorXd p = problem.map().initial();
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(p.size());
+  EXPECT_GT(term.value(p, &g), 0);
+  ASSERT_GE(p.size(), 2);
+  EXPECT_GT(g.tail(p.size() - 1).norm(), 0.0);  // the multiplier's coefficients
+  EXPECT_LT((g - central_differences(term, p, 1e-4)).norm(), 1e-6 * g.norm());
+}
+
 // γ Σ (p_a − p_b)² over face neighbours of a per-element field: zero on a uniform
 // field, its gradient that of central differences elsewhere.
 TEST(ParameterTerms, TheSmoothnessTermMeasuresDifferencesAcrossFaces) {

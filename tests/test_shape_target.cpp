@@ -266,6 +266,18 @@ TEST(ShapeTarget, TheBundledExamplePassesGradcheck) {
   EXPECT_NE(r.out.find("PASS: the gradient methods agree"), std::string::npos) << r.out;
 }
 
+// A run shortened after loading would leave the target unseen (Φ = 0, a check that
+// passes on nothing): refused, naming the target.
+TEST(ShapeTarget, ATargetAfterAShortenedRunIsRefused) {
+  const test::CliRun r = test::run_kelvin(
+      "gradcheck " KELVIN_SOURCE_DIR "/yaml/examples/target-shape.yaml --end 0.1 --no-forward");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("target-shape.yaml:34: fit.objective.targets: 'flat-bottom' at t = 0.2 s "
+                       "lies after the end of the run (t = 0.1 s)"),
+            std::string::npos)
+      << r.out;
+}
+
 // A diagnosis explains a misfit to measurements: it refuses targets at once, before
 // any fit, naming the line of the first one.
 TEST(ShapeTarget, TheDiagnosisRefusesShapeTargets) {
@@ -276,6 +288,27 @@ TEST(ShapeTarget, TheDiagnosisRefusesShapeTargets) {
   EXPECT_NE(r.out.find("target-shape.yaml:34: fit.objective.targets: a diagnosis explains"),
             std::string::npos)
       << r.out;
+}
+
+// Targets in a further experiment of the fit are refused too, in that file.
+TEST(ShapeTarget, TheDiagnosisRefusesTargetsOfAFurtherExperiment) {
+  const fs::path dir = test::scratch("shape-target-diagnose-experiment");
+  test::write_text(dir / "other.yaml", bar(R"(
+fit:
+  parameters: [elastic.mu]
+  objective:
+    targets: [ { time: 0.05, select: { plane: { axis: x, at: 0.06 } }, offset: [0, 0, 0] } ]
+)"));
+  test::write_text(dir / "main.yaml", bar(R"(
+fit:
+  parameters: [elastic.mu]
+  experiments: [other.yaml]
+)"));
+  const test::CliRun r = test::run_kelvin("diagnose " + (dir / "main.yaml").string() + " -o " +
+                                          (dir / "out").string());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("other.yaml:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("fit.objective.targets: a diagnosis explains"), std::string::npos) << r.out;
 }
 
 // Each mistake is named with the file, line and key.
