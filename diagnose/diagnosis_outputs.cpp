@@ -8,8 +8,8 @@
 #include <iterator>
 #include <map>
 
-#include "fit/svg_plot.hpp"
 #include "engine/output.hpp"
+#include "fit/svg_plot.hpp"
 
 namespace kelvin {
 namespace {

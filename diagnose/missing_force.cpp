@@ -8,10 +8,10 @@
 #include <filesystem>
 
 #include "base/error.hpp"
+#include "engine/output.hpp"
 #include "fit/body_force_outputs.hpp"
 #include "fit/fit_loop.hpp"
 #include "fit/fitted_scenario.hpp"
-#include "engine/output.hpp"
 #include "yaml/scenario_paths.hpp"
 #include "yaml/yaml_util.hpp"
 

@@ -14,8 +14,8 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
-#include "fit/fit_loop.hpp"
 #include "engine/csv.hpp"
+#include "fit/fit_loop.hpp"
 #include "gradient_agreement.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"

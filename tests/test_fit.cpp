@@ -18,9 +18,9 @@
 #include <sstream>
 
 #include "adjoint/uncertainty.hpp"
+#include "engine/csv.hpp"
 #include "fit/fit_loop.hpp"
 #include "fit/fit_state.hpp"
-#include "engine/csv.hpp"
 #include "test_support.hpp"
 
 namespace kelvin {

@@ -10,8 +10,8 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/score_screening.hpp"
 #include "adjoint/uncertainty.hpp"
-#include "fit/fit_loop.hpp"
 #include "engine/csv.hpp"
+#include "fit/fit_loop.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
 
