@@ -177,30 +177,34 @@ std::vector<double> ExperimentRun::boundaries() const {
   return b;
 }
 
-void ExperimentRun::add_targets(double t, const Eigen::VectorXd& x_free, ExperimentResult& result) {
-  const auto& targets = ex.targets();
-  if (targets.empty()) return;
-  if (result.phi_targets.size() != static_cast<Eigen::Index>(targets.size()))
-    result.phi_targets.setZero(static_cast<Eigen::Index>(targets.size()));
+template <class Visit>
+void ExperimentRun::visit_targets_at(double t, const Eigen::VectorXd& x_free, Visit visit) {
   Eigen::Matrix3Xd xs, vs;
   bool expanded = false;
+  const auto& targets = ex.targets();
   for (size_t k = 0; k < targets.size(); ++k) {
     if (std::abs(targets[k].time() - t) > kSameTime * (t_end - t0)) continue;
     if (!expanded) model.expand(t, x_free.data(), nullptr, xs, vs);
     expanded = true;
-    result.phi_targets[static_cast<Eigen::Index>(k)] += targets[k].value(xs);
+    visit(static_cast<Eigen::Index>(k), targets[k], xs);
   }
 }
 
+void ExperimentRun::add_targets(double t, const Eigen::VectorXd& x_free, ExperimentResult& result) {
+  const auto count = static_cast<Eigen::Index>(ex.targets().size());
+  if (count == 0) return;
+  if (result.phi_targets.size() != count) result.phi_targets.setZero(count);
+  visit_targets_at(t, x_free,
+                   [&](Eigen::Index k, const ShapeTarget& target, const Eigen::Matrix3Xd& xs) {
+                     result.phi_targets[k] += target.value(xs);
+                   });
+}
+
 void ExperimentRun::add_target_gradient(double t, const Eigen::VectorXd& x_free, double* gradient) {
-  Eigen::Matrix3Xd xs, vs;
-  bool expanded = false;
-  for (const ShapeTarget& target : ex.targets()) {
-    if (std::abs(target.time() - t) > kSameTime * (t_end - t0)) continue;
-    if (!expanded) model.expand(t, x_free.data(), nullptr, xs, vs);
-    expanded = true;
-    target.add_gradient(model, xs, gradient);
-  }
+  visit_targets_at(t, x_free,
+                   [&](Eigen::Index, const ShapeTarget& target, const Eigen::Matrix3Xd& xs) {
+                     target.add_gradient(model, xs, gradient);
+                   });
 }
 
 long ExperimentRun::checkpoint_budget() const {

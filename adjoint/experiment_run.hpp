@@ -52,6 +52,10 @@ struct ExperimentRun {
   /// positions at t; with `gradient`, their ∂Φ/∂x (free dofs) is added there instead.
   void add_targets(double t, const Eigen::VectorXd& x_free, ExperimentResult& result);
   void add_target_gradient(double t, const Eigen::VectorXd& x_free, double* gradient);
+  /// visit(k, target, x) for every target at time t, with the full positions x
+  /// expanded once from x_free.
+  template <class Visit>
+  void visit_targets_at(double t, const Eigen::VectorXd& x_free, Visit visit);
   /// Most steps one segment's Hermite points may hold (GradientOptions::checkpoint_steps).
   long checkpoint_budget() const;
   /// True when this evaluation decides the experiment's automatic segment plan.

@@ -288,10 +288,4 @@ Eigen::VectorXd MarkerObjective::marker_rms(const Eigen::VectorXd& phi) const {
   return rms;
 }
 
-double MarkerObjective::rms(const Eigen::VectorXd& phi) const {
-  double total = 0;
-  for (double t : weighted_time_) total += t;
-  return std::sqrt(2 * phi.sum() / total);
-}
-
 }  // namespace kelvin

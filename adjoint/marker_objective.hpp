@@ -87,10 +87,10 @@ class MarkerObjective {
 
   /// ∫ wᵢ dt over marker i's observed intervals in the window: RMSᵢ = sqrt(2Φᵢ / this).
   double weighted_observed_time(int i) const { return weighted_time_[i]; }
-  /// Per-marker RMS distances and the overall one, sqrt(2Φ / Σᵢ wᵢTᵢ) — for full
-  /// observation and unit weights Real2Sim's sqrt(2Φ/(N T)).
+  /// Per-marker RMS distances sqrt(2Φᵢ / wᵢTᵢ) — for full observation and unit
+  /// weights Real2Sim's sqrt(2Φ/(N T)). The overall one, with the shape targets,
+  /// is Experiment::rms.
   Eigen::VectorXd marker_rms(const Eigen::VectorXd& phi_per_marker) const;
-  double rms(const Eigen::VectorXd& phi_per_marker) const;
 
  private:
   /// Observed position of marker i at t in the capture's own frame and clock, and

@@ -152,11 +152,7 @@ IntegratorStats IdasBackward::stats() const {
   void* mem_b = IDAGetAdjIDABmem(impl_->mem, impl_->which);
   long v = 0;
   if (IDAGetNumSteps(mem_b, &v) == 0) s.steps = v;
-  if (IDAGetNumResEvals(mem_b, &v) == 0) s.residual_evals = v;
-  if (IDAGetNumJacEvals(mem_b, &v) == 0) s.jacobian_evals = v;
-  if (IDAGetNumLinSolvSetups(mem_b, &v) == 0) s.linear_setups = v;
-  if (IDAGetNumErrTestFails(mem_b, &v) == 0) s.error_test_failures = v;
-  if (IDAGetNumNonlinSolvConvFails(mem_b, &v) == 0) s.convergence_failures = v;
+  read_idas_counters(mem_b, s);
   return s;
 }
 

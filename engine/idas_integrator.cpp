@@ -456,13 +456,7 @@ double IdasIntegrator::restart_step() const {
 IntegratorStats IdasIntegrator::stats() const {
   IntegratorStats s = impl_->stats;
   void* mem = impl_->mem;
-  if (!mem) return s;
-  long v = 0;
-  if (IDAGetNumResEvals(mem, &v) == 0) s.residual_evals = v;
-  if (IDAGetNumJacEvals(mem, &v) == 0) s.jacobian_evals = v;
-  if (IDAGetNumLinSolvSetups(mem, &v) == 0) s.linear_setups = v;
-  if (IDAGetNumErrTestFails(mem, &v) == 0) s.error_test_failures = v;
-  if (IDAGetNumNonlinSolvConvFails(mem, &v) == 0) s.convergence_failures = v;
+  if (mem) read_idas_counters(mem, s);
   return s;
 }
 

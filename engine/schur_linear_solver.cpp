@@ -1,6 +1,7 @@
 #include "engine/schur_linear_solver.hpp"
 
 #include <fmt/format.h>
+#include <idas/idas.h>
 #include <nvector/nvector_serial.h>
 
 #include <chrono>
@@ -59,6 +60,15 @@ SUNLinearSolver make_schur_linear_solver(SUNContext ctx, SchurLinearSolver* cont
   S->ops->solve = schur_solve;
   S->ops->free = schur_free;
   return S;
+}
+
+void read_idas_counters(void* mem, IntegratorStats& s) {
+  long v = 0;
+  if (IDAGetNumResEvals(mem, &v) == 0) s.residual_evals = v;
+  if (IDAGetNumJacEvals(mem, &v) == 0) s.jacobian_evals = v;
+  if (IDAGetNumLinSolvSetups(mem, &v) == 0) s.linear_setups = v;
+  if (IDAGetNumErrTestFails(mem, &v) == 0) s.error_test_failures = v;
+  if (IDAGetNumNonlinSolvConvFails(mem, &v) == 0) s.convergence_failures = v;
 }
 
 void check_sundials(int flag, const char* call) {

@@ -27,4 +27,8 @@ SUNLinearSolver make_schur_linear_solver(SUNContext ctx, SchurLinearSolver* cont
 /// Throws kelvin::Error naming the call when a SUNDIALS set-up call failed (flag < 0).
 void check_sundials(int flag, const char* call);
 
+/// IDAS's own counters of `mem` (residuals, Jacobians, setups, error-test and
+/// convergence failures) into `stats`; steps are left to the caller.
+void read_idas_counters(void* mem, IntegratorStats& stats);
+
 }  // namespace kelvin

@@ -42,6 +42,11 @@ std::string bar(const std::string& tail, const std::string& material = kMaterial
   return test::shaken_bar_yaml(b);
 }
 
+/// A `fit:` section fitting μ with these `targets:` entries (YAML list lines).
+std::string fit_targets(const std::string& entries) {
+  return "\nfit:\n  parameters: [elastic.mu]\n  objective:\n    targets:" + entries;
+}
+
 Scenario load(const fs::path& dir, const std::string& name, const std::string& yaml) {
   test::write_text(dir / (name + ".yaml"), yaml);
   return load_scenario((dir / (name + ".yaml")).string());
@@ -70,15 +75,11 @@ ExperimentResult evaluate(FitProblem& problem, GradientMethod method, double seg
 // known in closed form at any time: w/2 · 9 nodes · the squared clamp offset.
 TEST(ShapeTarget, ValueIsHalfTheWeightedSquaredDistanceAtItsTime) {
   const fs::path dir = test::scratch("shape-target-value");
-  const Scenario s = load(dir, "s", bar(R"(
-fit:
-  parameters: [elastic.mu]
-  objective:
-    targets:
+  const Scenario s = load(dir, "s", bar(fit_targets(R"(
       - { name: start, time: 0, select: { plane: { axis: x, at: 0 } }, offset: [0, 0, 0], weight: 2 }
       - { name: middle, time: 0.037, select: { plane: { axis: x, at: 0 } }, plane: { axis: y, at: 0 } }
       - { name: end, time: 0.1, select: { plane: { axis: x, at: 0 } }, offset: [0, 0, 0], weight: 0.5 }
-)"));
+)")));
   ASSERT_EQ(s.fit.objective.targets.size(), 3u);
   EXPECT_EQ(s.fit.objective.targets[0].nodes.size(), 9u);
   FitProblem problem(s, {positive_fit_parameter("elastic.mu")});
@@ -103,14 +104,10 @@ TEST(ShapeTarget, GradientsAgreeThreeWaysBesideTheMarkers) {
   const fs::path dir = test::scratch("shape-target-gradient");
   const std::string tracks = test::simulate_tracks(dir, "truth", bar(test::kShakenBarMarkers));
   const Scenario s = load(dir, "fit",
-                          bar(test::kShakenBarMarkers + "\n  observed: " + tracks + R"(
-fit:
-  parameters: [elastic.mu]
-  objective:
-    targets:
+                          bar(test::kShakenBarMarkers + "\n  observed: " + tracks + fit_targets(R"(
       - { time: 0.05, select: { plane: { axis: x, at: 0.06 } }, plane: { axis: y, at: 0.001 }, weight: 0.05 }
       - { time: 0.1, select: { box: { lo: [0.025, 0, 0], hi: [0.035, 0.02, 0.02] } }, offset: [0, 0.002, -0.001], weight: 0.02 }
-)",
+)"),
                               R"(
   density: 1000
   elastic: { model: neo-hookean, lambda: 2.2e5, mu: 0.9e5 }
@@ -125,14 +122,10 @@ fit:
 // sag under gravity depends on the stiffness, so λx(t₀) carries it to K₀⁻ᵀ.
 TEST(ShapeTarget, GradientsAgreeForTargetsAloneWithOneAtTheStaticStart) {
   const fs::path dir = test::scratch("shape-target-alone");
-  const Scenario s = load(dir, "fit", bar(R"(
-fit:
-  parameters: [elastic.mu]
-  objective:
-    targets:
+  const Scenario s = load(dir, "fit", bar(fit_targets(R"(
       - { name: sag, time: 0, select: { plane: { axis: x, at: 0.06 } }, plane: { axis: z, at: 0.0 } }
       - { name: swing, time: 0.06, select: { plane: { axis: x, at: 0.06 } }, offset: [0, 0.004, 0] }
-)"));
+)")));
   FitProblem problem(s, {positive_fit_parameter("elastic.mu"), positive_fit_parameter("viscous.nu"),
                          positive_fit_parameter("density")});
   EXPECT_EQ(problem.experiment(0).objective().num_markers(), 0);
@@ -143,13 +136,9 @@ fit:
 // they are: the target's time is a boundary of its own.
 TEST(ShapeTarget, SegmentsAroundTheTargetTimeGiveTheSameGradient) {
   const fs::path dir = test::scratch("shape-target-segments");
-  const Scenario s = load(dir, "fit", bar(R"(
-fit:
-  parameters: [elastic.mu]
-  objective:
-    targets:
+  const Scenario s = load(dir, "fit", bar(fit_targets(R"(
       - { time: 0.05, select: { plane: { axis: x, at: 0.06 } }, offset: [0, 0.003, 0.001] }
-)"));
+)")));
   FitProblem problem(s,
                      {positive_fit_parameter("elastic.mu"), positive_fit_parameter("viscous.nu")});
   const ExperimentResult one = evaluate(problem, GradientMethod::kAdjoint);
@@ -187,13 +176,9 @@ TEST(ShapeTarget, AFitRecoversTheStiffnessThatMadeTheTargetShape) {
                        truth.xyz(3 * i + 1, f), truth.xyz(3 * i + 2, f));
   test::write_text(dir / "target.csv", csv);
   const Scenario s = load(dir, "fit",
-                          bar(R"(
-fit:
-  parameters: [elastic.mu]
-  objective:
-    targets:
+                          bar(fit_targets(R"(
       - { time: 0.05, positions: target.csv }
-)",
+)"),
                               R"(
   density: 1100
   elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.6e5 }
