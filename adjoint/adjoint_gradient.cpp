@@ -1,10 +1,11 @@
-// The adjoint gradient with IDAS ASA. For F = [x' − v ; R(t, x, v, v'; q)] the
-// adjoint λ = (λx, λv) solves, backward from λ(T) = 0,
-//   λx' − Kᵀλv + ∂g/∂x = 0,    M λv' + λx − Dᵀλv = 0,
-// and dΦ/dq = −∫ λvᵀ ∂R/∂q dt + λx(t₀)ᵀ ∂x₀/∂q, the last term from a static initial
-// state (one solve with K₀ᵀ, Real2Sim Eq. 14). IDAS integrates the backward
-// quadrature q' = λvᵀ∂R/∂q from q(T) = 0 down to t₀, so q(t₀) = −∫_{t₀}^{T} λvᵀ∂R/∂q dt
-// is the integral term itself.
+// The adjoint gradient with IDAS ASA. For F = [x' − v ; R(t, x, v, v', z; q) ; z' − f]
+// the adjoint λ = (λx, λv, λz) solves, backward from λ(T) = 0,
+//   λx' − Kᵀλv + f_xᵀλz + ∂g/∂x = 0,   M λv' + λx − Dᵀλv = 0,   λz' − K_xzᵀλv + f_zᵀλz = 0
+// (no λz without internal variables), and
+//   dΦ/dq = −∫ (λvᵀ ∂R/∂q − λzᵀ ∂f/∂q) dt + (λx + z₀,ₓᵀ λz)(t₀)ᵀ ∂x₀/∂q,
+// the last term from a static initial state (one solve with K₀ᵀ, Real2Sim Eq. 14; z₀ is
+// relaxed at x₀). IDAS integrates the backward quadrature from q(T) = 0 down to t₀,
+// so q(t₀) is the integral term itself.
 //
 // Segments: the forward pass stores one state per segment boundary (in a temporary
 // file, see BoundaryStates); each segment is then re-integrated from its start,
@@ -46,7 +47,7 @@ struct Backward {
   explicit Backward(ExperimentRun& r) : run(r), n(r.n), dae(r.model), kt(r.n), dt(r.n) {}
 
   bool cached_at(double t, const double* y) const {
-    return t == cached_t && std::memcmp(cached_y.data(), y, sizeof(double) * 2 * n) == 0;
+    return t == cached_t && std::memcmp(cached_y.data(), y, sizeof(double) * cached_y.size()) == 0;
   }
 
   /// Element tangents, dP/dq and ∂g/∂x at the forward state (t, y), computed once
@@ -62,26 +63,30 @@ struct Backward {
     gx.setZero(n);
     run.objective.add_gradient(t, run.model, x, gx.data());
     cached_t = t;
-    cached_y = Eigen::Map<const Eigen::VectorXd>(y, 2 * n);
+    cached_y = Eigen::Map<const Eigen::VectorXd>(y, dae.size());
     return true;
   }
 
-  /// rB = [λx' − Kᵀλv + g_x ; M λv' + λx − Dᵀλv].
+  /// rB = [λx' − Kᵀλv + f_xᵀλz + g_x ; M λv' + λx − Dᵀλv ; λz' − K_xzᵀλv + f_zᵀλz].
   void residual(const double* l, const double* lp, double* r) const {
     run.model.transpose_multiply(dae.tangents(), l + n, kt.data(), dt.data(), slots);
     for (int c = 0; c < n; ++c) {
       r[c] = lp[c] - kt[c] + gx[c];
       r[n + c] = l[c] - dt[c];
     }
+    for (int c = 2 * n; c < dae.size(); ++c) r[c] = lp[c];
     run.model.mass_multiply(lp + n, r + n);
+    dae.add_internal_adjoint_terms(l, r);
   }
 
   /// λ' consistent with λ at the cached state.
   void consistent_derivative(const double* l, double* lp) {
-    std::vector<double> r(2 * n);
-    std::fill(lp, lp + 2 * n, 0.0);
-    residual(l, lp, r.data());  // with λ' = 0: r = [−Kᵀλv + g_x ; λx − Dᵀλv]
+    const int size = dae.size();
+    std::vector<double> r(size);
+    std::fill(lp, lp + size, 0.0);
+    residual(l, lp, r.data());  // with λ' = 0
     for (int i = 0; i < n; ++i) lp[i] = -r[i];
+    for (int i = 2 * n; i < size; ++i) lp[i] = -r[i];
     Eigen::VectorXd rhs = -Eigen::Map<Eigen::VectorXd>(r.data() + n, n);
     dae.mass_solve(rhs.data(), lp + n);
   }
@@ -143,7 +148,7 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
     b.peak.v = std::max(b.peak.v, lam.tail(n).lpNorm<Eigen::Infinity>());
     std::fill(q, q + run.map.size(), 0.0);
     const ElementTangents* cached = b.cached_at(t, y) ? &b.dae.tangents() : nullptr;
-    return run.contract(l + n, 1.0, q, cached);
+    return run.contract(l + n, 1.0, q, cached, l + 2 * n);
   };
   problem.jacobian = [&b](double t, double cj, const double* y) {
     if (!b.at(t, y)) return false;
@@ -152,22 +157,34 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
     return true;
   };
 
-  Eigen::VectorXd lambda_rate(2 * n);
+  const int size = run.state_size();
+  Eigen::VectorXd lambda_rate(size);
+  // λz's typical size: its rows λz' = K_xzᵀλv − f_zᵀλz settle at |K_xz| |λv| / |f_z|.
+  double lambda_z_per_v = 0;
   {
-    Eigen::VectorXd yT(2 * n);
-    yT << forward.positions(), forward.velocities();
+    Eigen::VectorXd yT(size);
+    yT << forward.positions(), forward.velocities(), forward.internal();
     if (!b.at(T1, yT.data())) throw Error("the final state is inadmissible");
     b.consistent_derivative(lambda.data(), lambda_rate.data());
+    const InternalLinearisation& lin = b.dae.internal();
+    for (size_t k = 0; k < lin.Kxz.size(); ++k)
+      lambda_z_per_v =
+          std::max(lambda_z_per_v, lin.Kxz[k].cwiseAbs().maxCoeff() /
+                                       std::max(lin.fz[k].cwiseAbs().maxCoeff(), 1e-300));
   }
   IdasBackward backward(forward, std::move(problem), T1, lambda, lambda_rate,
                         static_cast<int>(dphi_dp.size()), run.iopt.max_order, run.iopt.max_steps);
 
   // Each attempt restarts from λ(T1) over the same stored forward steps.
   const double rtol = run.iopt.rtol * (run.iopt.max_order <= 2 ? kLowOrderBackwardRtolScale : 1.0);
-  Eigen::VectorXd atol(2 * n);
+  Eigen::VectorXd atol(size);
   for (int attempt = 0;; ++attempt) {
     atol.head(n).setConstant(rtol * kAdjointAtolFactor * run.lambda_x_ref);
-    atol.tail(n).setConstant(rtol * kAdjointAtolFactor * run.lambda_v_ref);
+    atol.segment(n, n).setConstant(rtol * kAdjointAtolFactor * run.lambda_v_ref);
+    // Uncoupled (a branch at zero modulus), λz stays 0: any finite tolerance serves.
+    atol.tail(size - 2 * n)
+        .setConstant(rtol * kAdjointAtolFactor * run.lambda_v_ref *
+                     (lambda_z_per_v > 0 ? lambda_z_per_v : 1.0));
     b.peak = {};
     const bool ok = backward.solve(T0, rtol, atol);
     const IntegratorStats stats = backward.stats();
@@ -198,6 +215,7 @@ bool backward_segment(ExperimentRun& run, IdasIntegrator& forward, double T0, do
 /// temporary file can be made, and from the state on which the disk is full.
 class BoundaryStates {
  public:
+  /// States (x, v, z) of n values each.
   explicit BoundaryStates(long n) : n_(n), file_(std::tmpfile()) {}
   ~BoundaryStates() {
     if (file_) std::fclose(file_);
@@ -205,34 +223,33 @@ class BoundaryStates {
   BoundaryStates(const BoundaryStates&) = delete;
   BoundaryStates& operator=(const BoundaryStates&) = delete;
 
-  void push(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+  void push(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const Eigen::VectorXd& z) {
+    Eigen::VectorXd y(n_);
+    y << x, v, z;
     // Flushed at once, so that a full disk shows here and not when reading back.
     if (file_ && memory_.empty() &&
-        std::fseek(file_, static_cast<long>(2 * in_file_ * n_ * sizeof(double)), SEEK_SET) == 0 &&
-        std::fwrite(x.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
-        std::fwrite(v.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
+        std::fseek(file_, static_cast<long>(in_file_ * n_ * sizeof(double)), SEEK_SET) == 0 &&
+        std::fwrite(y.data(), sizeof(double), n_, file_) == static_cast<size_t>(n_) &&
         std::fflush(file_) == 0) {
       ++in_file_;
       return;
     }
-    memory_.push_back(x);
-    memory_.push_back(v);
+    memory_.push_back(y);
   }
 
-  void get(long k, Eigen::VectorXd& x, Eigen::VectorXd& v) {
-    x.resize(n_);
-    v.resize(n_);
+  void get(long k, long n, Eigen::VectorXd& x, Eigen::VectorXd& v, Eigen::VectorXd& z) {
+    Eigen::VectorXd y(n_);
     if (k >= in_file_) {
-      x = memory_[2 * (k - in_file_)];
-      v = memory_[2 * (k - in_file_) + 1];
-      return;
-    }
-    if (std::fseek(file_, static_cast<long>(2 * k * n_ * sizeof(double)), SEEK_SET) != 0 ||
-        std::fread(x.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_) ||
-        std::fread(v.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_))
+      y = memory_[k - in_file_];
+    } else if (std::fseek(file_, static_cast<long>(k * n_ * sizeof(double)), SEEK_SET) != 0 ||
+               std::fread(y.data(), sizeof(double), n_, file_) != static_cast<size_t>(n_)) {
       throw IoError(fmt::format(
           "could not read segment boundary state {} back from the adjoint's temporary file ({})", k,
           std::strerror(errno)));
+    }
+    x = y.head(n);
+    v = y.segment(n, n);
+    z = y.tail(n_ - 2 * n);
   }
 
  private:
@@ -260,24 +277,24 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
 
   // Pass 1 (only with several segments): Φ and the state at every boundary but the
   // last, with the first step each restart takes (pass 2 retraces pass 1's steps).
-  BoundaryStates boundaries(run.x0.size());
-  boundaries.push(run.x0, run.v0);
+  BoundaryStates boundaries(run.state_size());
+  boundaries.push(run.x0, run.v0, run.z0);
   std::vector<long> segment_steps;
   std::vector<double> first_steps{0.0};
   result.phi_per_marker.setZero(run.objective.num_markers());
   if (!run.integrate_segments(T, segments - 1, result, [&](int, IdasIntegrator& integ) {
-        boundaries.push(integ.positions(), integ.velocities());
+        boundaries.push(integ.positions(), integ.velocities(), integ.internal());
         segment_steps.push_back(integ.stats().steps);
         first_steps.push_back(integ.restart_step());
       }))
     return;
 
   Eigen::VectorXd dphi_dp = Eigen::VectorXd::Zero(run.map.size());
-  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(2 * n);
+  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(run.state_size());
   EvaluationPlan::AdjointPeaks seen;
-  Eigen::VectorXd x, v;
+  Eigen::VectorXd x, v, z;
   for (int k = segments - 1; k >= 0; --k) {
-    boundaries.get(k, x, v);
+    boundaries.get(k, n, x, v, z);
     // Every segment is ONE IDAS checkpoint interval. With several, IDASolveB
     // re-integrates each interval from its checkpoint with a fresh Newton matrix;
     // that run can take more steps than the forward one did, and IDAS 6 then
@@ -302,7 +319,7 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
     long overrun = 0;
     bool ok = false;
     for (;;) {
-      integ = run.start(T[k], x, v, first_steps[k]);
+      integ = run.start(T[k], x, v, z, first_steps[k]);
       integ->record_checkpoints(points);
       ok = run.advance(*integ, T[k + 1], result);
       const long steps = integ->stats().steps;
@@ -333,9 +350,12 @@ void evaluate_adjoint(ExperimentRun& run, ExperimentResult& result) {
 
   run.add_target_gradient(T[0], run.x0, lambda.data());
   if (run.static_initial()) {
-    // + λx(t₀)ᵀ x₀_q = −μᵀ ∂R/∂q at the static state, K₀ᵀ μ = λx(t₀).
+    // + (λx + z₀,ₓᵀλz)(t₀)ᵀ x₀_q = −μᵀ ∂R/∂q at the static state, K₀ᵀ μ = λx + z₀,ₓᵀλz.
     run.factor_static_stiffness();
-    const Eigen::VectorXd mu = run.K0->transpose().solve(lambda.head(n));
+    Eigen::VectorXd rhs = lambda.head(n);
+    if (lambda.size() > 2 * n)
+      run.model.relaxed_internal_change_transpose(run.x, lambda.data() + 2 * n, rhs.data());
+    const Eigen::VectorXd mu = run.K0->transpose().solve(rhs);
     if (!run.contract(mu.data(), -1.0, dphi_dp.data()))
       throw Error("an element is inadmissible at the static state");
   }

@@ -140,6 +140,12 @@ ExperimentRun::ExperimentRun(Experiment& e, EvaluationPlan& pl, const ParameterM
           static_cast<int>(dependencies.size());
     }
   initial_state(ex.scenario(), model, x0, v0);
+  if (model.num_internal() > 0) {
+    z0.resize(model.num_internal());
+    Eigen::Matrix3Xd xs, vs;
+    model.expand(t0, x0.data(), nullptr, xs, vs);
+    model.relaxed_internal(xs, z0.data());
+  }
   if (iopt.max_order <= 0)
     iopt.max_order = plan.order_cap(model, iopt, t_end, x0, v0, o.tolerance_scale);
 }
@@ -208,17 +214,17 @@ void ExperimentRun::add_target_gradient(double t, const Eigen::VectorXd& x_free,
 }
 
 long ExperimentRun::checkpoint_budget() const {
-  return opt.checkpoint_steps > 0 ? opt.checkpoint_steps : default_checkpoint_steps(2 * n);
+  return opt.checkpoint_steps > 0 ? opt.checkpoint_steps : default_checkpoint_steps(dae.size());
 }
 
 bool ExperimentRun::integrate_segments(
     const std::vector<double>& T, int count, ExperimentResult& result,
     const std::function<void(int, IdasIntegrator&)>& segment_done) {
-  Eigen::VectorXd xk = x0, vk = v0;
+  Eigen::VectorXd xk = x0, vk = v0, zk = z0;
   double first_step = 0;
   add_targets(T[0], x0, result);
   for (int k = 0; k < count; ++k) {
-    auto integ = start(T[k], xk, vk, first_step);
+    auto integ = start(T[k], xk, vk, zk, first_step);
     const bool ok = advance(*integ, T[k + 1], result);
     result.forward_stats.steps += integ->stats().steps;
     // After a failure the quadrature cannot be read at the last output time (IDAS
@@ -229,6 +235,7 @@ bool ExperimentRun::integrate_segments(
     add_targets(T[k + 1], integ->positions(), result);
     xk = integ->positions();
     vk = integ->velocities();
+    zk = integ->internal();
     first_step = integ->restart_step();
     if (segment_done) segment_done(k, *integ);
   }
@@ -239,16 +246,18 @@ void ExperimentRun::expand(double t, const double* y, const double* yp) {
   t_state = t;
   model.expand(t, y, y + n, x, v);
   model.expand_acceleration(t, yp + n, a);
+  z = Eigen::Map<const Eigen::VectorXd>(y + 2 * n, model.num_internal());
 }
 
 std::unique_ptr<IdasIntegrator> ExperimentRun::start(double t, const Eigen::VectorXd& x_free,
                                                      const Eigen::VectorXd& v_free,
+                                                     const Eigen::VectorXd& z_internal,
                                                      double first_step) {
   IntegratorOptions o = iopt;
   if (first_step > 0)
     o.initial_step = o.max_step > 0 ? std::min(first_step, o.max_step) : first_step;
   auto integ = std::make_unique<IdasIntegrator>(model, o);
-  integ->initialize(t, x_free, v_free);
+  integ->initialize(t, x_free, v_free, z_internal);
   // Φ's integrand has kinks at every capture frame (linear tracks) and jumps where
   // a marker drops out; across them BDF quadrature without error control loses
   // about 1e-6 of Φ, which finite differences and Taylor tests see. With error
@@ -323,23 +332,43 @@ bool ExperimentRun::advance(IdasIntegrator& integ, double t1, ExperimentResult& 
 }
 
 bool ExperimentRun::param_vectors(Eigen::MatrixXd& B) {
-  B.setZero(n, map.size());
+  B.setZero(n + model.num_internal(), map.size());
   const auto& elements = model.elements();
   const std::size_t ne = elements.size();
-  return deriv.for_each(t_state, x, v, a, [&](int e, int s, const Vec12& dR) {
-    const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
-    for (std::size_t k = k0; k < k1; ++k) {
-      const auto [j, dq] = dependencies[k];
-      for (int i = 0; i < 12; ++i)
-        if (const int d = model.dof(elements[e].nodes[i / 3], i % 3); d >= 0) B(d, j) += dq * dR[i];
-    }
-  });
+  const auto& blocks = model.internal_blocks();
+  return deriv.for_each(
+      t_state, x, v, a,
+      [&](int e, int s, const Vec12& dR) {
+        const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
+        for (std::size_t k = k0; k < k1; ++k) {
+          const auto [j, dq] = dependencies[k];
+          for (int i = 0; i < 12; ++i)
+            if (const int d = model.dof(elements[e].nodes[i / 3], i % 3); d >= 0)
+              B(d, j) += dq * dR[i];
+        }
+      },
+      nullptr, z.size() ? z.data() : nullptr,
+      [&](int b, int s, const Eigen::VectorXd& dF) {
+        const int e = blocks[b].element;
+        const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
+        for (std::size_t k = k0; k < k1; ++k) {
+          const auto [j, dq] = dependencies[k];
+          B.col(j).segment(n + blocks[b].offset, blocks[b].size) += dq * dF;
+        }
+      });
 }
 
 bool ExperimentRun::contract(const double* lambda, double scale, double* out,
-                             const ElementTangents* cached) {
+                             const ElementTangents* cached, const double* lambda_z) {
   const auto& elements = model.elements();
   const std::size_t ne = elements.size();
+  const auto& blocks = model.internal_blocks();
+  const auto add = [&](int e, int s, double sum) {
+    const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
+    for (std::size_t k = k0; k < k1; ++k)
+      out[dependencies[k].first] += scale * sum * dependencies[k].second;
+  };
+  const bool internal = lambda_z && z.size();
   return deriv.for_each(
       t_state, x, v, a,
       [&](int e, int s, const Vec12& dR) {
@@ -347,11 +376,15 @@ bool ExperimentRun::contract(const double* lambda, double scale, double* out,
         for (int k = 0; k < 12; ++k)
           if (const int d = model.dof(elements[e].nodes[k / 3], k % 3); d >= 0)
             sum += lambda[d] * dR[k];
-        const std::size_t k0 = dependency_ptr[s * ne + e], k1 = dependency_ptr[s * ne + e + 1];
-        for (std::size_t k = k0; k < k1; ++k)
-          out[dependencies[k].first] += scale * sum * dependencies[k].second;
+        add(e, s, sum);
       },
-      cached);
+      cached, z.size() ? z.data() : nullptr,
+      [&](int b, int s, const Eigen::VectorXd& dF) {
+        if (!internal) return;
+        const InternalBlock& blk = blocks[b];
+        add(blk.element, s,
+            Eigen::Map<const Eigen::VectorXd>(lambda_z + blk.offset, blk.size).dot(dF));
+      });
 }
 
 void ExperimentRun::factor_static_stiffness() {
@@ -365,11 +398,12 @@ void ExperimentRun::factor_static_stiffness() {
   K0->compute(to_sparse_matrix(model.pattern(), out.K));
   if (K0->info() != Eigen::Success)
     throw Error("the stiffness at the static initial state is singular");
-  // ∂R/∂q at the static state: no velocity, no acceleration.
+  // ∂R/∂q at the static state: no velocity, no acceleration, internal variables relaxed.
   t_state = t0;
   x = xs;
   v.setZero(3, xs.cols());
   a.setZero(3, xs.cols());
+  z.resize(0);
 }
 
 void ExperimentRun::set_adjoint_scale(const ExperimentResult& result) {

@@ -29,8 +29,11 @@ struct ExperimentRun {
   int n = 0;
   double t0 = 0, t_end = 0;
   Eigen::VectorXd x0, v0;
+  Eigen::VectorXd z0;        // internal variables, relaxed at x0 (empty without them)
   Eigen::Matrix3Xd x, v, a;  // full nodal fields of the last expand()
+  Eigen::VectorXd z;         // and its internal variables (empty: relaxed, a static state)
   double t_state = 0;        // their time
+  int state_size() const { return dae.size(); }
 
   /// Observation parameters whose gradient this run integrates along with Φ
   /// (MarkerObjective's θ; 0 without a gradient or without observation blocks).
@@ -72,7 +75,8 @@ struct ExperimentRun {
   /// segment restart passes the first step the previous segment's integrator
   /// proposed (IdasIntegrator::restart_step); 0 keeps the scenario's choice.
   std::unique_ptr<IdasIntegrator> start(double t, const Eigen::VectorXd& x_free,
-                                        const Eigen::VectorXd& v_free, double first_step = 0);
+                                        const Eigen::VectorXd& v_free,
+                                        const Eigen::VectorXd& z_internal, double first_step = 0);
   /// Attaches the state sensitivities dy/dp_j (every entry j of p) to an integrator
   /// fresh from start() at t₀, and returns their initial values yS0 (2n × p.size()):
   /// forward-sensitivity gradients and marker sensitivities share this one setup.
@@ -89,14 +93,16 @@ struct ExperimentRun {
   /// run to t_stop and interpolates the state at t1.
   bool advance(IdasIntegrator& integ, double t1, ExperimentResult& result,
                std::optional<double> t_stop = std::nullopt);
-  /// ∂R/∂p_j over the free dofs for every entry j of p, at the current x, v, a.
+  /// ∂R/∂p_j over the free dofs for every entry j of p, at the current x, v, a, z,
+  /// followed by the internal variables' rows ∂(z' − f)/∂p_j (n + num_internal rows).
   bool param_vectors(Eigen::MatrixXd& B);
-  /// out[j] += scale · Σ_{s,e} λ_eᵀ ∂R_e/∂q_{s,e} ∂q_{s,e}/∂p_j at the current x, v, a
-  /// for every entry j of p (with dP/dq from `cached` when given, see
-  /// ParamDerivatives::for_each): the adjoint integrates p.size() quadratures, not
-  /// one per slot and element (a body force has thousands of slot-element pairs).
+  /// out[j] += scale · (Σ_{s,e} λ_eᵀ ∂R_e/∂q_{s,e} + λzᵀ ∂(z' − f)/∂q_{s,e}) ∂q_{s,e}/∂p_j
+  /// at the current x, v, a, z for every entry j of p (with dP/dq from `cached` when
+  /// given, see ParamDerivatives::for_each; lambda_z null at a static state): the
+  /// adjoint integrates p.size() quadratures, not one per slot and element (a body
+  /// force has thousands of slot-element pairs).
   bool contract(const double* lambda, double scale, double* out,
-                const ElementTangents* cached = nullptr);
+                const ElementTangents* cached = nullptr, const double* lambda_z = nullptr);
   /// ∂q_{s,e}/∂p at p, which stays put during an evaluation: (j, ∂q/∂p_j) pairs of
   /// slot s in element e in dependencies[dependency_ptr[s·ne + e] … [s·ne + e + 1]).
   std::vector<int> dependency_ptr;

@@ -1,5 +1,6 @@
 // Forward sensitivities with IDAS FSA (staggered corrector, analytic residual):
-//   s_x' − s_v = 0,   M s_v' + K s_x + D s_v + ∂R/∂p_j = 0,
+//   s_x' − s_v = 0,   M s_v' + K s_x + D s_v + K_xz s_z + ∂R/∂p_j = 0,
+//   s_z' − f_x s_x − f_z s_z − ∂f/∂p_j = 0 (internal variables z, when there are some),
 // with dΦ/dp_j = ∫ ∂g/∂x · s_x,j dt as a quadrature sensitivity. One linear system
 // per parameter per step: the cost grows with the number of parameters, which is
 // what the adjoint avoids.
@@ -42,20 +43,25 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
   const std::vector<int> entries = map.model_entries();
   const int ns = static_cast<int>(entries.size());
   const SparsePattern& P = model.pattern();
-  if (ns == 0) return Eigen::MatrixXd(2 * n, 0);
+  const int size = state_size(), m = size - 2 * n;
+  if (ns == 0) return Eigen::MatrixXd(size, 0);
 
   // Initial sensitivities: x₀_p from the static state (zero from rest), v₀_p = 0,
-  // and consistent derivatives s_v' = −M⁻¹(K s_x + D s_v + ∂R/∂p) at t₀.
-  Eigen::MatrixXd yS0 = Eigen::MatrixXd::Zero(2 * n, ns), ypS0 = Eigen::MatrixXd::Zero(2 * n, ns);
+  // z₀_p following x₀_p (z₀ is relaxed at x₀), and consistent derivatives
+  // s_v' = −M⁻¹(K s_x + D s_v + K_xz s_z + ∂R/∂p), s_z' = f_x s_x + f_z s_z + ∂f/∂p at t₀.
+  Eigen::MatrixXd yS0 = Eigen::MatrixXd::Zero(size, ns), ypS0 = Eigen::MatrixXd::Zero(size, ns);
   Eigen::MatrixXd B;
   if (static_initial()) {
     factor_static_stiffness();
     if (!param_vectors(B)) throw Error("an element is inadmissible at the static state");
-    for (int j = 0; j < ns; ++j) yS0.col(j).head(n) = -K0->solve(B.col(entries[j]));
+    for (int j = 0; j < ns; ++j) yS0.col(j).head(n) = -K0->solve(B.col(entries[j]).head(n));
+    if (m > 0)
+      for (int j = 0; j < ns; ++j)
+        model.relaxed_internal_change(x, yS0.col(j).data(), yS0.col(j).data() + 2 * n);
   }
   {
-    Eigen::VectorXd y(2 * n), yp(2 * n);
-    y << x0, v0;
+    Eigen::VectorXd y(size), yp(size);
+    y << x0, v0, z0;
     if (!dae.consistent_derivative(t0, y.data(), yp.data()) ||
         !dae.stiffness_and_damping(t0, y.data()))
       throw Error("the initial state is inadmissible");
@@ -63,11 +69,13 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
     if (!param_vectors(B)) throw Error("an element is inadmissible at the initial state");
     const AssemblyOutput& out = dae.last_assembly();
     for (int j = 0; j < ns; ++j) {
-      Eigen::VectorXd rhs = -B.col(entries[j]);
-      Eigen::VectorXd Ks = Eigen::VectorXd::Zero(n);
-      pattern_multiply(P, out.K, yS0.col(j).data(), Ks.data());
-      rhs -= Ks;
+      Eigen::VectorXd r = Eigen::VectorXd::Zero(size);  // ∂F/∂y s + ∂F/∂p without the s' terms
+      pattern_multiply(P, out.K, yS0.col(j).data(), r.data() + n);
+      dae.add_internal_product(yS0.col(j).data(), r.data());
+      r.tail(n + m) += B.col(entries[j]);
+      Eigen::VectorXd rhs = -r.segment(n, n);
       dae.mass_solve(rhs.data(), ypS0.col(j).data() + n);
+      ypS0.col(j).tail(m) = -r.tail(m);
     }
   }
 
@@ -85,22 +93,24 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
       [this, cache, params, entries](double t, const double* y, const double* yp, int count,
                                      const double* const* yS, const double* const* ypS,
                                      double* const* resS) {
-        if (!cache->matches(t, y, yp, 2 * n)) {
+        const int size = state_size();
+        if (!cache->matches(t, y, yp, size)) {
           if (!dae.stiffness_and_damping(t, y)) return false;
           expand(t, y, yp);
           if (!param_vectors(*params)) return false;
-          cache->store(t, y, yp, 2 * n);
+          cache->store(t, y, yp, size);
         }
         const AssemblyOutput& out = dae.last_assembly();
         const SparsePattern& P = model.pattern();
         for (int j = 0; j < count; ++j) {
           double* r = resS[j];
           for (int i = 0; i < n; ++i) r[i] = ypS[j][i] - yS[j][n + i];
-          Eigen::Map<Eigen::VectorXd> rv(r + n, n);
-          rv = params->col(entries[j]);
+          Eigen::Map<Eigen::VectorXd>(r + n, size - n) = params->col(entries[j]);
+          for (int i = 2 * n; i < size; ++i) r[i] += ypS[j][i];
           model.mass_multiply(ypS[j] + n, r + n);
           pattern_multiply(P, out.K, yS[j], r + n);
           pattern_multiply(P, out.D, yS[j] + n, r + n);
+          dae.add_internal_product(yS[j], r);
         }
         return true;
       },
@@ -110,7 +120,7 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
 
 void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result) {
   const int n = run.n;
-  auto integ = run.start(run.t0, run.x0, run.v0);
+  auto integ = run.start(run.t0, run.x0, run.v0, run.z0);
   // A gradient for the line search: its accuracy is worth the extra steps.
   const std::vector<int> entries = run.map.model_entries();
   const Eigen::MatrixXd yS0 = run.add_sensitivities(*integ, true);

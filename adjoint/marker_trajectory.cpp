@@ -66,7 +66,7 @@ MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::V
 
     // Built like Experiment::evaluate's forward pass and stopped only at the end of
     // the run, so that the samples lie on the very trajectory whose Φ a fit sees.
-    auto integ = run.start(run.t0, run.x0, run.v0);
+    auto integ = run.start(run.t0, run.x0, run.v0, run.z0);
     Eigen::MatrixXd yS0;
     // The sensitivities here build JᵀJ (standard errors, the fit's Gauss–Newton
     // restart), whose singular values they give to two digits either way: with

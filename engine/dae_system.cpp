@@ -2,13 +2,21 @@
 
 #include <Eigen/SparseCholesky>
 
+#include "base/error.hpp"
+
 namespace kelvin {
 
-DaeSystem::DaeSystem(const FemModel& model) : model_(model), n_(model.num_dofs()) {}
+DaeSystem::DaeSystem(const FemModel& model)
+    : model_(model), n_(model.num_dofs()), m_(model.num_internal()) {}
 
 bool DaeSystem::residual(double t, const double* y, const double* yp, double* r) {
   model_.expand(t, y, y + n_, x_, v_);
-  if (!model_.assemble(x_, v_, {}, out_)) return false;
+  const double* z = m_ ? y + 2 * n_ : nullptr;
+  if (!model_.assemble(x_, v_, {}, out_, z)) return false;
+  if (m_) {
+    if (!model_.linearise_internal(x_, v_, z, 0, internal_)) return false;
+    for (int k = 0; k < m_; ++k) r[2 * n_ + k] = yp[2 * n_ + k] - internal_.rate[k];
+  }
   model_.clamp_inertia(t, clamp_inertia_);
   model_.clamp_pull(t, true, clamp_pull_);
   model_.body_force_load(t, body_load_);
@@ -27,12 +35,17 @@ bool DaeSystem::stiffness_and_damping(double t, const double* y) {
   req.force = false;
   req.stiffness = true;
   req.damping = true;
-  return model_.assemble(x_, v_, req, out_);
+  const double* z = m_ ? y + 2 * n_ : nullptr;
+  return model_.assemble(x_, v_, req, out_, z) &&
+         (!m_ || model_.linearise_internal(x_, v_, z, kTangent, internal_));
 }
 
 bool DaeSystem::element_tangents(double t, const double* y, bool param_derivatives) {
   model_.expand(t, y, y + n_, x_, v_);
-  return model_.element_tangents(x_, v_, tangents_, param_derivatives);
+  const double* z = m_ ? y + 2 * n_ : nullptr;
+  const unsigned request = kTangent | (param_derivatives ? kParamDerivative : 0u);
+  return model_.element_tangents(x_, v_, tangents_, param_derivatives, z) &&
+         (!m_ || model_.linearise_internal(x_, v_, z, request, internal_));
 }
 
 void DaeSystem::assemble_from_tangents() {
@@ -40,6 +53,7 @@ void DaeSystem::assemble_from_tangents() {
 }
 
 bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {
+  if (m_) throw Error("the CSC Newton matrix is not written for materials with internal variables");
   if (!stiffness_and_damping(t, y)) return false;
   const SparsePattern& P = model_.pattern();
   const std::vector<double>& M = model_.mass();
@@ -55,9 +69,50 @@ bool DaeSystem::jacobian(double t, double cj, const double* y, double* val) {
   return true;
 }
 
+void DaeSystem::add_internal_product(const double* s, double* r) const {
+  const auto& blocks = model_.internal_blocks();
+  for (size_t k = 0; k < blocks.size(); ++k) {
+    const InternalBlock& b = blocks[k];
+    Eigen::Matrix<double, 12, 1> se;
+    for (int j = 0; j < 12; ++j) {
+      const int d = model_.element_dof(b.element, j);
+      se[j] = d >= 0 ? s[d] : 0.0;
+    }
+    const Eigen::Map<const Eigen::VectorXd> sz(s + 2 * n_ + b.offset, b.size);
+    const Eigen::Matrix<double, 12, 1> f = internal_.Kxz[k] * sz;
+    for (int j = 0; j < 12; ++j)
+      if (const int d = model_.element_dof(b.element, j); d >= 0) r[n_ + d] += f[j];
+    Eigen::Map<Eigen::VectorXd>(r + 2 * n_ + b.offset, b.size) -=
+        internal_.fx[k] * se + internal_.fz[k] * sz;
+  }
+}
+
+void DaeSystem::add_internal_adjoint_terms(const double* lambda, double* r) const {
+  const auto& blocks = model_.internal_blocks();
+  for (size_t k = 0; k < blocks.size(); ++k) {
+    const InternalBlock& b = blocks[k];
+    Eigen::Matrix<double, 12, 1> lv;
+    for (int j = 0; j < 12; ++j) {
+      const int d = model_.element_dof(b.element, j);
+      lv[j] = d >= 0 ? lambda[n_ + d] : 0.0;
+    }
+    const Eigen::Map<const Eigen::VectorXd> lz(lambda + 2 * n_ + b.offset, b.size);
+    const Eigen::Matrix<double, 12, 1> f = internal_.fx[k].transpose() * lz;
+    for (int j = 0; j < 12; ++j)
+      if (const int d = model_.element_dof(b.element, j); d >= 0) r[d] += f[j];
+    Eigen::Map<Eigen::VectorXd>(r + 2 * n_ + b.offset, b.size) +=
+        internal_.fz[k].transpose() * lz - internal_.Kxz[k].transpose() * lv;
+  }
+}
+
 bool DaeSystem::consistent_derivative(double t, const double* y, double* yp) {
   model_.expand(t, y, y + n_, x_, v_);
-  if (!model_.assemble(x_, v_, {}, out_)) return false;
+  const double* z = m_ ? y + 2 * n_ : nullptr;
+  if (!model_.assemble(x_, v_, {}, out_, z)) return false;
+  if (m_) {
+    if (!model_.linearise_internal(x_, v_, z, 0, internal_)) return false;
+    for (int k = 0; k < m_; ++k) yp[2 * n_ + k] = internal_.rate[k];
+  }
   model_.clamp_inertia(t, clamp_inertia_);
   model_.clamp_pull(t, true, clamp_pull_);
   model_.body_force_load(t, body_load_);

@@ -140,6 +140,14 @@ FemModel::FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::Vec
           clamp_face_entries_.push_back(pattern_.find(dof(f.nodes[a], i), dof(f.nodes[b], i)));
   build_mass();
   update_rest_tangents();
+  number_internal_variables();
+}
+
+void FemModel::scatter_element_matrix(int e, const Eigen::Matrix<double, 12, 12>& A,
+                                      double* values) const {
+  const int* sc = &scatter_[static_cast<size_t>(e) * 144];
+  for (int k = 0; k < 144; ++k)
+    if (sc[k] >= 0) values[sc[k]] += A(k % 12, k / 12);
 }
 
 void FemModel::set_clamp_compliance(int clamp, double compliance) {
@@ -247,7 +255,8 @@ void FemModel::update_rest_tangents() {
   MaterialResponse resp;
   for (int e = 0; e < ne; ++e)
     for (const auto& term : terms_) {
-      if (term.model->is_viscous()) continue;
+      // A branch with internal variables carries no stress at rest: it has no C₀.
+      if (term.model->is_viscous() || term.model->internal_size() > 0) continue;
       mp.q = term.q.col(e).data();
       mp.state = term.state.size() ? term.state.col(e).data() : nullptr;
       mp.element = e;
@@ -332,7 +341,8 @@ void FemModel::gather(const std::vector<int>& ptr, const std::vector<int>& src, 
 
 template <class Body>
 std::pair<int, double> FemModel::for_each_element(const Eigen::Matrix3Xd& x,
-                                                  const Eigen::Matrix3Xd& v, unsigned request,
+                                                  const Eigen::Matrix3Xd& v, const double* z,
+                                                  unsigned request,
                                                   std::vector<ElementResponse>& scratch,
                                                   Body body) const {
   const int ne = mesh_.num_tets();
@@ -343,7 +353,7 @@ std::pair<int, double> FemModel::for_each_element(const Eigen::Matrix3Xd& x,
   for (int e = 0; e < ne; ++e) {
     ElementResponse& er = scratch[thread_index()];
     try {
-      if (evaluate_element(e, x, v, request, er))
+      if (evaluate_element(e, x, v, request, er, z))
         body(e, er);
       else
         failed = std::min(failed, e);
@@ -358,7 +368,7 @@ std::pair<int, double> FemModel::for_each_element(const Eigen::Matrix3Xd& x,
   if (thrown && thrown_at <= failed) std::rethrow_exception(thrown);
   if (failed == ne) return {-1, 0.0};
   ElementResponse& er = scratch[0];
-  evaluate_element(failed, x, v, request, er);  // again, for its det F
+  evaluate_element(failed, x, v, request, er, z);  // again, for its det F
   return {failed, er.det_F};
 }
 
@@ -498,7 +508,7 @@ void FemModel::mass_multiply(const double* x, double* y) const {
 }
 
 bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                                unsigned request, ElementResponse& out) const {
+                                unsigned request, ElementResponse& out, const double* z) const {
   const auto& el = elements_[e];
   Eigen::Matrix<double, 3, 4> xe, ve;
   for (int a = 0; a < 4; ++a) {
@@ -518,6 +528,18 @@ bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::M
   if (request & kParamDerivative) out.dPdq.resize(terms_.size());
   MaterialResponse& resp = out.term;
   for (const auto& term : terms_) {
+    const int t = static_cast<int>(&term - terms_.data());
+    if (internal_base_[t] >= 0) {
+      if (!z) {
+        // Relaxed: no stress, and nothing of dP/dq either (sized for the caller).
+        if (request & kParamDerivative)
+          out.dPdq[t].setZero(9, static_cast<int>(term.model->params().size()));
+        continue;
+      }
+      mp.internal = z + internal_base_[t] + term.model->internal_size() * e;
+    } else {
+      mp.internal = nullptr;
+    }
     const bool viscous = term.model->is_viscous();
     unsigned r = request;
     if (viscous)
@@ -545,7 +567,7 @@ bool FemModel::evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::M
 }
 
 bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                        const AssemblyRequest& req, AssemblyOutput& out) const {
+                        const AssemblyRequest& req, AssemblyOutput& out, const double* z) const {
   const int ne = mesh_.num_tets();
   ElementSlots& slots = out.slots;
   if (req.force) slots.vector_a.resize(12 * static_cast<size_t>(ne));
@@ -560,7 +582,7 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
   if (req.energy) request |= kEnergy;
 
   const auto [failed, det] =
-      for_each_element(x, v, request, slots.scratch, [&](int e, const ElementResponse& er) {
+      for_each_element(x, v, z, request, slots.scratch, [&](int e, const ElementResponse& er) {
         const auto& el = elements_[e];
         if (req.energy) out.cell_energy[e] = er.energy;
         if (req.force) {
@@ -607,7 +629,8 @@ bool FemModel::assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
 }
 
 bool FemModel::element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                                ElementTangents& out, bool param_derivatives) const {
+                                ElementTangents& out, bool param_derivatives,
+                                const double* z) const {
   const int ne = mesh_.num_tets();
   out.dPdF.resize(ne);
   out.dPdFdot.resize(ne);
@@ -616,7 +639,7 @@ bool FemModel::element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3X
   const unsigned request =
       kStress | kTangent | kRateTangent | (param_derivatives ? kParamDerivative : 0u);
   const auto [failed, det] =
-      for_each_element(x, v, request, out.scratch, [&](int e, const ElementResponse& er) {
+      for_each_element(x, v, z, request, out.scratch, [&](int e, const ElementResponse& er) {
         out.dPdF[e] = er.dPdF;
         out.dPdFdot[e] = er.dPdFdot;
         out.mass_damping[e] = er.mass_damping;

@@ -129,6 +129,26 @@ struct ElementTangents {
   std::vector<ElementResponse> scratch;  // one per thread (workspace)
 };
 
+/// One element's internal variables of one material term (MaterialTerm::model with
+/// internal_size() > 0): z[offset … offset + size) of the model's internal state.
+struct InternalBlock {
+  int term = 0, element = 0, offset = 0, size = 0;
+};
+
+/// The internal variables' law ż = f(F(x), z; q) at one state, and per block its
+/// linearisation: what the element's resisting force r_e owes to z, and f to the
+/// element's nodes, to z and to the parameters.
+struct InternalLinearisation {
+  Eigen::VectorXd rate;                                        // f over all internal variables
+  std::vector<Eigen::Matrix<double, 12, Eigen::Dynamic>> Kxz;  // ∂r_e/∂z_b (dofs 3a + i)
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 12>> fx;   // ∂f_b/∂x_e
+  std::vector<Eigen::MatrixXd> fz;                             // ∂f_b/∂z_b
+  std::vector<Eigen::MatrixXd> fq;  // ∂f_b/∂q (the term's parameters)
+  /// Per thread, reused from call to call so that a step does not allocate.
+  std::vector<InternalResponse> evolution;
+  std::vector<MaterialResponse> response;
+};
+
 class FemModel {
  public:
   FemModel(const Mesh& mesh, std::vector<MaterialTerm> terms, Eigen::VectorXd density,
@@ -191,16 +211,51 @@ class FemModel {
   /// y += M x over the free dofs.
   void mass_multiply(const double* x, double* y) const;
 
-  /// Assembles the requested quantities at full positions x and velocities v.
-  /// Returns false (with failed_element set) when some element is inadmissible.
+  /// Assembles the requested quantities at full positions x and velocities v, and
+  /// internal variables z (null: terms with internal variables are relaxed and carry
+  /// nothing, as in static equilibrium). Returns false (with failed_element set) when
+  /// some element is inadmissible.
   bool assemble(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const AssemblyRequest& req,
-                AssemblyOutput& out) const;
+                AssemblyOutput& out, const double* z = nullptr) const;
 
   /// Per-element tangents (and, with param_derivatives, every term's dP/dq) at full
-  /// positions x and velocities v; false (with failed_element set) when some element
-  /// is inadmissible.
+  /// positions x, velocities v and internal variables z (as for assemble); false
+  /// (with failed_element set) when some element is inadmissible.
   bool element_tangents(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, ElementTangents& out,
-                        bool param_derivatives = false) const;
+                        bool param_derivatives = false, const double* z = nullptr) const;
+
+  /// Internal variables (materials with internal_size() > 0, e.g. a relaxing branch):
+  /// how many, and their blocks in term-then-element order. They join the
+  /// integrated state after the velocities (DaeSystem).
+  int num_internal() const { return num_internal_; }
+  const std::vector<InternalBlock>& internal_blocks() const { return internal_blocks_; }
+  /// Index into internal_blocks() of term t's variables in element e, or −1.
+  int internal_block(int t, int e) const {
+    return internal_first_block_[t] < 0 ? -1 : internal_first_block_[t] + e;
+  }
+  /// z relaxed at full positions x (every block's f = 0 with x held): the state of a
+  /// body that starts at rest or in equilibrium.
+  void relaxed_internal(const Eigen::Matrix3Xd& x, double* z) const;
+  /// The change of the relaxed z along a change dx of the free dofs,
+  /// dz = −f_z⁻¹ f_x dx (for laws whose relaxed z does not depend on q).
+  void relaxed_internal_change(const Eigen::Matrix3Xd& x, const double* dx_free, double* dz) const;
+  /// Its transpose: out_free += (∂z/∂x)ᵀ lz (the adjoint's initial condition).
+  void relaxed_internal_change_transpose(const Eigen::Matrix3Xd& x, const double* lz,
+                                         double* out_free) const;
+  /// Per internal variable, how much its error matters: its block's stiffness at rest
+  /// over the element's elastic stiffness at rest (‖∂P/∂F‖ at F = I), at most 1. A
+  /// branch at zero modulus gets 0 and leaves the integrator's error test, so that it
+  /// steps exactly as the model without it.
+  Eigen::VectorXd internal_error_share() const;
+  /// f at (x, v, z) and, with request kTangent / kParamDerivative, its linearisation;
+  /// false when a term rejects the state.
+  bool linearise_internal(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v, const double* z,
+                          unsigned request, InternalLinearisation& out) const;
+  /// values += A (element e's 12 × 12 matrix, dofs 3a + i) over its free entries of
+  /// the pattern.
+  void scatter_element_matrix(int e, const Eigen::Matrix<double, 12, 12>& A, double* values) const;
+  /// Free dof of element e's local dof k = 3a + i, or −1 for a clamped one.
+  int element_dof(int e, int k) const { return dof(elements_[e].nodes[k / 3], k % 3); }
   /// K and D values in pattern() order from element tangents.
   void assemble_tangents(const ElementTangents& t, std::vector<double>& K, std::vector<double>& D,
                          ElementSlots& slots) const;
@@ -227,9 +282,10 @@ class FemModel {
   double external_potential(const Eigen::Matrix3Xd& x) const;
 
   /// P, the requested tangents (kTangent, kRateTangent) and energy of element e,
-  /// summed over the material terms; false when a term rejects the state.
+  /// summed over the material terms (those with internal variables only when z is
+  /// given); false when a term rejects the state.
   bool evaluate_element(int e, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                        unsigned request, ElementResponse& out) const;
+                        unsigned request, ElementResponse& out, const double* z = nullptr) const;
 
  private:
   void build_pattern();
@@ -246,8 +302,14 @@ class FemModel {
   /// returns the lowest failing element (−1 when none) and its det F.
   template <class Body>
   std::pair<int, double> for_each_element(const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
-                                          unsigned request, std::vector<ElementResponse>& scratch,
-                                          Body body) const;
+                                          const double* z, unsigned request,
+                                          std::vector<ElementResponse>& scratch, Body body) const;
+  void number_internal_variables();
+  /// linearise_internal at the z relaxed at x.
+  InternalLinearisation relaxed_linearisation(const Eigen::Matrix3Xd& x) const;
+  /// The material point of block b at full positions x (F, q, state; internal from z).
+  MaterialPoint internal_point(const InternalBlock& b, const Eigen::Matrix3Xd& x,
+                               const double* z) const;
 
   const Mesh& mesh_;
   std::vector<MaterialTerm> terms_;
@@ -276,6 +338,10 @@ class FemModel {
   std::vector<int> clamp_face_entries_;      // per face 3 × 3 node pairs: K's diagonal-block entry
   std::vector<Mat9> rest_tangent_;           // per element, only when some term needs it
   BodyForceField body_force_;
+  int num_internal_ = 0;
+  std::vector<int> internal_base_;         // per term: its first internal variable, or −1
+  std::vector<int> internal_first_block_;  // per term: its first internal block, or −1
+  std::vector<InternalBlock> internal_blocks_;
 };
 
 }  // namespace kelvin

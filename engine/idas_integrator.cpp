@@ -29,10 +29,12 @@ struct IdasIntegrator::Impl {
   const FemModel& model;
   IntegratorOptions opt;
   int n = 0;
+  int size = 0;  // of the state: 2n + the internal variables
   SUNContext ctx = nullptr;
   void* mem = nullptr;
   N_Vector y = nullptr, yp = nullptr, yout = nullptr, atol = nullptr;
-  Eigen::VectorXd rest;  // rest positions of the free dofs (the error weights' origin)
+  Eigen::VectorXd rest;            // rest positions of the free dofs (the error weights' origin)
+  Eigen::VectorXd internal_share;  // FemModel::internal_error_share
   SUNMatrix J = nullptr;
   SUNLinearSolver LS = nullptr;
   double t_solver = 0;  // internal time of IDAS
@@ -59,7 +61,8 @@ struct IdasIntegrator::Impl {
   int failed_element = -1;
   double failed_det = 0, failed_time = 0;
 
-  Impl(const FemModel& m, const IntegratorOptions& o) : model(m), opt(o), n(m.num_dofs()), dae(m) {}
+  Impl(const FemModel& m, const IntegratorOptions& o)
+      : model(m), opt(o), n(m.num_dofs()), size(2 * n + m.num_internal()), dae(m) {}
 
   ~Impl() {
     if (mem) IDAFree(&mem);
@@ -143,6 +146,8 @@ int error_weights(N_Vector y, N_Vector weights, void* data) {
   double* w = N_VGetArrayPointer(weights);
   for (int i = 0; i < m.n; ++i) w[i] = 1.0 / (m.opt.rtol * std::abs(yy[i] - m.rest[i]) + atol[i]);
   for (int i = m.n; i < 2 * m.n; ++i) w[i] = 1.0 / (m.opt.rtol * std::abs(yy[i]) + atol[i]);
+  for (int i = 2 * m.n; i < m.size; ++i)
+    w[i] = m.internal_share[i - 2 * m.n] / (m.opt.rtol * std::abs(yy[i]) + atol[i]);
   return 0;
 }
 
@@ -216,19 +221,29 @@ IdasIntegrator::IdasIntegrator(const FemModel& model, const IntegratorOptions& o
 
 IdasIntegrator::~IdasIntegrator() = default;
 
-void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eigen::VectorXd& v0) {
+void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eigen::VectorXd& v0,
+                                const Eigen::VectorXd& z0) {
   Impl& m = *impl_;
-  const int n = m.n;
+  const int n = m.n, nz = m.size - 2 * n;
   if (n == 0) throw Error("every node is clamped: there is nothing to simulate");
   check_sundials(SUNContext_Create(nullptr, &m.ctx), "SUNContext_Create");
-  m.y = new_state_vector(2 * n, m.ctx);
-  m.yp = new_state_vector(2 * n, m.ctx);
-  m.yout = new_state_vector(2 * n, m.ctx);
-  m.atol = new_state_vector(2 * n, m.ctx);
+  m.y = new_state_vector(m.size, m.ctx);
+  m.yp = new_state_vector(m.size, m.ctx);
+  m.yout = new_state_vector(m.size, m.ctx);
+  m.atol = new_state_vector(m.size, m.ctx);
   double* y = N_VGetArrayPointer(m.y);
   double* yp = N_VGetArrayPointer(m.yp);
   Eigen::Map<Eigen::VectorXd>(y, n) = x0;
   Eigen::Map<Eigen::VectorXd>(y + n, n) = v0;
+  if (nz > 0) {
+    if (z0.size() == nz) {
+      Eigen::Map<Eigen::VectorXd>(y + 2 * n, nz) = z0;
+    } else {
+      Eigen::Matrix3Xd x, v;
+      m.model.expand(t0, x0.data(), nullptr, x, v);
+      m.model.relaxed_internal(x, y + 2 * n);
+    }
+  }
 
   if (!m.dae.consistent_derivative(t0, y, yp))
     throw Error(fmt::format("initial state: element {} is inverted (det F = {:.3g})",
@@ -244,12 +259,18 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
     atol[i] = m.opt.atol;
     atol[n + i] = m.opt.atol * m.opt.velocity_atol_scale;
   }
+  // Internal variables are strains: the position tolerance over the body's size.
+  const double extent =
+      (m.model.mesh().nodes.rowwise().maxCoeff() - m.model.mesh().nodes.rowwise().minCoeff())
+          .maxCoeff();
+  for (int i = 2 * n; i < m.size; ++i) atol[i] = m.opt.atol / std::max(extent, 1e-300);
+  m.internal_share = m.model.internal_error_share();
   m.rest.resize(n);
   m.model.restrict(m.model.mesh().nodes, m.rest.data());
   check_sundials(IDASetUserData(m.mem, &m), "IDASetUserData");  // before IDAWFtolerances: its data
   check_sundials(IDAWFtolerances(m.mem, error_weights), "IDAWFtolerances");
   // The Newton matrix lives in SchurSolver; IDAS only needs a placeholder matrix.
-  m.J = SUNSparseMatrix(2 * n, 2 * n, 1, CSC_MAT, m.ctx);
+  m.J = SUNSparseMatrix(m.size, m.size, 1, CSC_MAT, m.ctx);
   m.LS = make_schur_linear_solver(m.ctx, &m.linear_solver);
   if (!m.J || !m.LS) throw Error("could not create the IDAS linear solver");
   check_sundials(IDASetLinearSolver(m.mem, m.LS, m.J), "IDASetLinearSolver");
@@ -262,6 +283,7 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   t_ = t0;
   x_ = x0;
   v_ = v0;
+  z_ = Eigen::Map<const Eigen::VectorXd>(y + 2 * n, nz);
 }
 
 void IdasIntegrator::add_quadrature(int nq, QuadratureRhs rhs, bool error_control, double atol) {
@@ -293,8 +315,8 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
   m.yS = N_VCloneVectorArray(m.ns, m.y);
   m.ypS = N_VCloneVectorArray(m.ns, m.y);
   for (int i = 0; i < m.ns; ++i) {
-    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.yS[i]), 2 * m.n) = yS0.col(i);
-    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.ypS[i]), 2 * m.n) = ypS0.col(i);
+    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.yS[i]), m.size) = yS0.col(i);
+    Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(m.ypS[i]), m.size) = ypS0.col(i);
   }
   check_sundials(IDASensInit(m.mem, m.ns, IDA_STAGGERED, sensitivity_fn, m.yS, m.ypS),
                  "IDASensInit");
@@ -314,12 +336,12 @@ void IdasIntegrator::add_sensitivities(SensitivityResidual res, const Eigen::Mat
 
 Eigen::MatrixXd IdasIntegrator::state_sensitivities() const {
   const Impl& m = *impl_;
-  Eigen::MatrixXd out(2 * m.n, m.ns);
+  Eigen::MatrixXd out(m.size, m.ns);
   if (m.ns == 0) return out;
   N_Vector* s = N_VCloneVectorArray(m.ns, m.y);
   const int flag = IDAGetSensDky(m.mem, t_, 0, s);
   for (int i = 0; i < m.ns; ++i)
-    out.col(i) = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(s[i]), 2 * m.n);
+    out.col(i) = Eigen::Map<const Eigen::VectorXd>(N_VGetArrayPointer(s[i]), m.size);
   N_VDestroyVectorArray(s, m.ns);
   if (flag < 0)
     throw Error(fmt::format("could not interpolate the sensitivities at t = {:.6g} s", t_));
@@ -434,6 +456,7 @@ bool IdasIntegrator::advance_to(double tout, double t_stop, long step_budget) {
   t_ = t;
   x_ = Eigen::Map<const Eigen::VectorXd>(yo, n);
   v_ = Eigen::Map<const Eigen::VectorXd>(yo + n, n);
+  z_ = Eigen::Map<const Eigen::VectorXd>(yo + 2 * n, m.size - 2 * n);
   return true;
 }
 

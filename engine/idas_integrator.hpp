@@ -1,9 +1,7 @@
 #pragma once
 /// \file
-/// IDAS on the implicit first-order form of the equations of motion
-///   F(t, y, y') = [ x' − v ;  M v' + M_fc a_c(t) + r(x, v) − f_ext ] = 0,  y = (x, v),
-/// with the analytic Newton matrix J = ∂F/∂y + c_j ∂F/∂y' = [ c_j I  −I ; K  c_j M + D ]
-/// in CSC form (pattern fixed at construction) factored by KLU.
+/// IDAS on the implicit first-order form of the equations of motion, y = (x, v, z)
+/// (engine/dae_system.hpp), its Newton systems solved by SchurSolver.
 #include <Eigen/Core>
 #include <array>
 #include <atomic>
@@ -58,10 +56,12 @@ class IdasIntegrator {
   IdasIntegrator(const IdasIntegrator&) = delete;
   IdasIntegrator& operator=(const IdasIntegrator&) = delete;
 
-  /// Starts at t0 from free-dof positions and velocities; computes a consistent
-  /// v' from the equations of motion (x' = v). Throws kelvin::Error when the
-  /// initial state is inadmissible.
-  void initialize(double t0, const Eigen::VectorXd& x0, const Eigen::VectorXd& v0);
+  /// Starts at t0 from free-dof positions and velocities and the internal variables
+  /// z0 (FemModel::num_internal of them; empty: relaxed at x0, as a body starts at
+  /// rest or in equilibrium); computes a consistent y' from the equations of motion.
+  /// Throws kelvin::Error when the initial state is inadmissible.
+  void initialize(double t0, const Eigen::VectorXd& x0, const Eigen::VectorXd& v0,
+                  const Eigen::VectorXd& z0 = {});
 
   /// Adds quadratures (after initialize()): nq integrands, started at 0 and, with
   /// `error_control`, included in the step-size control with tolerances rtol, atol.
@@ -70,14 +70,14 @@ class IdasIntegrator {
   Eigen::VectorXd quadrature() const;
 
   /// Forward sensitivities (after initialize(); staggered corrector): initial values
-  /// yS0, ypS0 (2n × ns) and typical parameter magnitudes pbar that scale the
+  /// yS0, ypS0 (state size × ns) and typical parameter magnitudes pbar that scale the
   /// sensitivity error weights. Quadrature sensitivities follow the quadrature.
   /// With `error_control` the sensitivities join the local error test (IDAS's
   /// errconS); without it they ride on the steps the state's own test chooses.
   void add_sensitivities(SensitivityResidual res, const Eigen::MatrixXd& yS0,
                          const Eigen::MatrixXd& ypS0, const Eigen::VectorXd& pbar,
                          bool error_control);
-  /// State sensitivities dy/dp at time() (2n × ns); needs a step taken.
+  /// State sensitivities dy/dp at time() (state size × ns); needs a step taken.
   Eigen::MatrixXd state_sensitivities() const;
   void add_quadrature_sensitivities(QuadratureSensitivityRhs rhs);
   /// Quadrature sensitivities at time(): nq × ns.
@@ -105,6 +105,7 @@ class IdasIntegrator {
   double solver_time() const;                              // how far IDAS has stepped
   const Eigen::VectorXd& positions() const { return x_; }  // free dofs at time()
   const Eigen::VectorXd& velocities() const { return v_; }
+  const Eigen::VectorXd& internal() const { return z_; }  // internal variables at time()
   const std::string& error() const { return error_; }
   IntegratorStats stats() const;
 
@@ -116,7 +117,7 @@ class IdasIntegrator {
   void* sundials_context() const;
   std::unique_ptr<Impl> impl_;
   double t_ = 0;
-  Eigen::VectorXd x_, v_;
+  Eigen::VectorXd x_, v_, z_;
   std::string error_;
 };
 

@@ -74,7 +74,8 @@ void ParamDerivatives::update() {
 
 bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                                 const Eigen::Matrix3Xd& a, const Visitor& visit,
-                                const ElementTangents* cached) const {
+                                const ElementTangents* cached, const double* z,
+                                const InternalVisitor& visit_internal) const {
   const auto& terms = model_.terms();
   const int nt = static_cast<int>(terms.size());
   const auto& elements = model_.elements();
@@ -107,10 +108,18 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
     for (int t = 0; t < nt; ++t) {
       mp.q = terms[t].q.col(e).data();
       mp.state = terms[t].state.size() ? terms[t].state.col(e).data() : nullptr;
+      const int m = terms[t].model->internal_size();
+      mp.internal =
+          m > 0 && z ? z + model_.internal_blocks()[model_.internal_block(t, e)].offset : nullptr;
       if (const int k = terms[t].model->mass_damping_param(); k >= 0) mass_damping += mp.q[k];
       if (!needed[t]) continue;
       if (cached) {
         dPdq[t] = &cached->dPdq[e][t];
+        continue;
+      }
+      if (m > 0 && !z) {  // relaxed: no stress, and none of its derivatives
+        evaluated[t].setZero(9, static_cast<int>(terms[t].model->params().size()));
+        dPdq[t] = &evaluated[t];
         continue;
       }
       if (!terms[t].model->evaluate(mp, kParamDerivative, resp)) return false;
@@ -147,6 +156,16 @@ bool ParamDerivatives::for_each(double t, const Eigen::Matrix3Xd& x, const Eigen
           }
         dR = (el.volume * dP * el.G).reshaped();
         if (slot.index == m.mass_damping_param()) dR += model_.element_mass_times(e, ve).reshaped();
+        if (const int size = m.internal_size(); size > 0 && z && visit_internal) {
+          MaterialPoint mi = mp;
+          mi.q = terms[slot.term].q.col(e).data();
+          mi.state = terms[slot.term].state.size() ? terms[slot.term].state.col(e).data() : nullptr;
+          const int block = model_.internal_block(slot.term, e);
+          mi.internal = z + model_.internal_blocks()[block].offset;
+          InternalResponse ir;
+          m.evolve(mi, kParamDerivative, ir);
+          visit_internal(block, s, -ir.dq.col(slot.index));
+        }
       }
       visit(e, s, dR);
     }

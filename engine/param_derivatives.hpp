@@ -51,10 +51,16 @@ class ParamDerivatives {
   /// x, v, a are full nodal fields at time t. False when a material rejects the state.
   /// `cached`, when it holds dP/dq (FemModel::element_tangents with
   /// param_derivatives) at this x and v, is used instead of evaluating the materials.
+  /// With internal variables z (FemModel::num_internal; null: relaxed, as in static
+  /// equilibrium, where such terms carry nothing), the stresses see them, and
+  /// visit_internal(b, s, dF) gets the derivative of their rows z' − f = 0 in
+  /// internal block b, dF = −∂f_b/∂q_{s}, for every slot of a term that has them.
   using Visitor = std::function<void(int e, int s, const Vec12& dR)>;
+  using InternalVisitor = std::function<void(int b, int s, const Eigen::VectorXd& dF)>;
   bool for_each(double t, const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                 const Eigen::Matrix3Xd& a, const Visitor& visit,
-                const ElementTangents* cached = nullptr) const;
+                const ElementTangents* cached = nullptr, const double* z = nullptr,
+                const InternalVisitor& visit_internal = {}) const;
 
  private:
   const FemModel& model_;

@@ -3,6 +3,8 @@
 #include <cholmod.h>
 #include <klu.h>
 
+#include <Eigen/LU>
+
 #include "base/error.hpp"
 
 namespace kelvin {
@@ -99,6 +101,20 @@ void SchurSolver::assemble_from_last(double cj) {
   const AssemblyOutput& out = dae_.last_assembly();
   const std::vector<double>& M = dae_.model().mass();
   for (size_t k = 0; k < S_.size(); ++k) S_[k] = out.K[k] + cj * out.D[k] + cj * cj * M[k];
+  const FemModel& model = dae_.model();
+  const auto& blocks = model.internal_blocks();
+  if (!blocks.empty()) {
+    const InternalLinearisation& lin = dae_.internal();
+    A_inv_.resize(blocks.size());
+    Kxz_ = lin.Kxz;
+    fx_ = lin.fx;
+    for (size_t b = 0; b < blocks.size(); ++b) {
+      const int m = blocks[b].size;
+      A_inv_[b] = (cj * Eigen::MatrixXd::Identity(m, m) - lin.fz[b]).inverse();
+      const Eigen::Matrix<double, 12, 12> C = Kxz_[b] * A_inv_[b] * fx_[b];
+      model.scatter_element_matrix(blocks[b].element, C, S_.data());
+    }
+  }
   for (size_t k = 0; k < S_.size(); ++k) S_sym_[k] = 0.5 * (S_[k] + S_[transpose_[k]]);
   K_ = out.K;
   D_ = out.D;
@@ -124,15 +140,42 @@ bool SchurSolver::factorize() {
   return k.numeric != nullptr;
 }
 
+Eigen::Matrix<double, 12, 1> SchurSolver::element_values(int e, const double* u) const {
+  Eigen::Matrix<double, 12, 1> ue;
+  for (int k = 0; k < 12; ++k) {
+    const int d = dae_.model().element_dof(e, k);
+    ue[k] = d >= 0 ? u[d] : 0.0;
+  }
+  return ue;
+}
+
 void SchurSolver::solve(const double* b, double* x) {
-  const SparsePattern& P = dae_.model().pattern();
-  const std::vector<double>& M = dae_.model().mass();
+  const FemModel& model = dae_.model();
+  const SparsePattern& P = model.pattern();
+  const std::vector<double>& M = model.mass();
+  const auto& blocks = model.internal_blocks();
   r1_ = Eigen::Map<const Eigen::VectorXd>(b, n_);
   rhs_ = Eigen::Map<const Eigen::VectorXd>(b + n_, n_);
   for (int c = 0; c < n_; ++c)
     for (int p = P.colptr[c]; p < P.colptr[c + 1]; ++p)
       rhs_[P.rowind[p]] += (cj_ * M[p] + D_[p]) * r1_[c];
+  const double* r3 = b + 2 * n_;
+  for (size_t k = 0; k < blocks.size(); ++k) {  // − K_xz A⁻¹ r₃
+    const InternalBlock& blk = blocks[k];
+    const Eigen::Matrix<double, 12, 1> f =
+        Kxz_[k] * (A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size));
+    for (int j = 0; j < 12; ++j)
+      if (const int d = model.element_dof(blk.element, j); d >= 0) rhs_[d] -= f[j];
+  }
   apply_inverse(rhs_.data(), false);
+  // x₃ before x₁, x₂: the right-hand side may alias the solution.
+  for (size_t k = 0; k < blocks.size(); ++k) {  // x₃ = A⁻¹(r₃ + f_x x₁)
+    const InternalBlock& blk = blocks[k];
+    const Eigen::VectorXd z =
+        A_inv_[k] * (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
+                     fx_[k] * element_values(blk.element, rhs_.data()));
+    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blk.offset, blk.size) = z;
+  }
   for (int i = 0; i < n_; ++i) {
     x[i] = rhs_[i];
     x[n_ + i] = cj_ * rhs_[i] - r1_[i];
@@ -140,15 +183,40 @@ void SchurSolver::solve(const double* b, double* x) {
 }
 
 void SchurSolver::solve_adjoint(const double* b, double* x) {
-  const SparsePattern& P = dae_.model().pattern();
+  const FemModel& model = dae_.model();
+  const SparsePattern& P = model.pattern();
+  const auto& blocks = model.internal_blocks();
   const double cB = -cj_;
   r1_ = Eigen::Map<const Eigen::VectorXd>(b, n_);
   rhs_ = cB * Eigen::Map<const Eigen::VectorXd>(b + n_, n_) - r1_;
+  const double* r3 = b + 2 * n_;
+  for (size_t k = 0; k < blocks.size(); ++k) {  // − f_xᵀ A⁻ᵀ r₃
+    const InternalBlock& blk = blocks[k];
+    const Eigen::Matrix<double, 12, 1> f =
+        fx_[k].transpose() *
+        (A_inv_[k].transpose() * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size));
+    for (int j = 0; j < 12; ++j)
+      if (const int d = model.element_dof(blk.element, j); d >= 0) rhs_[d] -= f[j];
+  }
   apply_inverse(rhs_.data(), true);
+  // x₃ = −A⁻ᵀ(r₃ + K_xzᵀ x₂), and f_xᵀ x₃ for x₁, before x is written (it may alias b).
+  Eigen::VectorXd fx3 = Eigen::VectorXd::Zero(n_);
+  std::vector<Eigen::VectorXd> z(blocks.size());
+  for (size_t k = 0; k < blocks.size(); ++k) {
+    const InternalBlock& blk = blocks[k];
+    z[k] =
+        -A_inv_[k].transpose() * (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
+                                  Kxz_[k].transpose() * element_values(blk.element, rhs_.data()));
+    const Eigen::Matrix<double, 12, 1> f = fx_[k].transpose() * z[k];
+    for (int j = 0; j < 12; ++j)
+      if (const int d = model.element_dof(blk.element, j); d >= 0) fx3[d] += f[j];
+  }
+  for (size_t k = 0; k < blocks.size(); ++k)
+    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blocks[k].offset, blocks[k].size) = z[k];
   for (int c = 0; c < n_; ++c) {
     double ktb = 0;  // (Kᵀ x₂)_c
     for (int p = P.colptr[c]; p < P.colptr[c + 1]; ++p) ktb += K_[p] * rhs_[P.rowind[p]];
-    x[c] = (r1_[c] + ktb) / cB;
+    x[c] = (r1_[c] + ktb - fx3[c]) / cB;
     x[n_ + c] = rhs_[c];
   }
 }

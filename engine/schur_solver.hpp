@@ -8,6 +8,11 @@
 /// an n × n system with the FEM sparsity pattern. Half the unknowns and a fraction
 /// of the fill of factorising the 2n × 2n matrix (bench_forward).
 ///
+/// Internal variables z (FemModel::num_internal; DaeSystem's third block) are
+/// eliminated element by element first: their rows c_j z − f_z z − f_x x = r₃ give
+/// z = A⁻¹(r₃ + f_x x), A = c_j I − f_z, and S gains K_xz A⁻¹ f_x in each element's
+/// block (a relaxing branch's stiffness, scaled by how far it relaxes in a step).
+///
 /// S is symmetric but for the viscous stresses' dependence on F (a small part of K),
 /// and positive definite while c_j² M dominates. Its symmetric part is factorised by
 /// CHOLMOD (simplicial Cholesky), which IDAS's
@@ -44,9 +49,10 @@ class SchurSolver {
   /// x = J⁻¹ b for the J of the last assemble()/factorize() (x may alias b).
   void solve(const double* b, double* x);
   /// x = J_B⁻¹ b for the Newton matrix of the adjoint problem,
-  ///   J_B = [ c_B I   −Kᵀ ; I   c_B M − Dᵀ ],
-  /// using the S of assemble(t, −c_B, y): b₂ solves Sᵀ x₂ = c_B r₂ − r₁ and
-  /// x₁ = (r₁ + Kᵀ x₂)/c_B — the transposed factorisation, no new pattern.
+  ///   J_B = [ c_B I   −Kᵀ   f_xᵀ ; I   c_B M − Dᵀ   0 ; 0   −K_xzᵀ   c_B I + f_zᵀ ],
+  /// using the S of assemble(t, −c_B, y): x₂ solves Sᵀ x₂ = c_B r₂ − r₁ − f_xᵀA⁻ᵀ r₃,
+  /// x₃ = −A⁻ᵀ(r₃ + K_xzᵀ x₂) and x₁ = (r₁ + Kᵀ x₂ − f_xᵀ x₃)/c_B — the transposed
+  /// factorisation, no new pattern.
   void solve_adjoint(const double* b, double* x);
   double cj() const { return cj_; }
 
@@ -61,6 +67,12 @@ class SchurSolver {
   std::vector<double> S_, S_sym_, K_, D_;  // values in the FEM pattern
   std::vector<int> transpose_;             // pattern index of entry (j, i) for entry (i, j)
   Eigen::VectorXd rhs_, r1_;
+  /// Per internal block, at the last assembly: A⁻¹, K_xz and f_x.
+  std::vector<Eigen::MatrixXd> A_inv_;
+  std::vector<Eigen::Matrix<double, 12, Eigen::Dynamic>> Kxz_;
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 12>> fx_;
+  /// Element values of a free-dof vector (0 at clamped dofs).
+  Eigen::Matrix<double, 12, 1> element_values(int e, const double* u) const;
   std::unique_ptr<Klu> klu_;
   std::unique_ptr<Cholmod> cholmod_;
   bool lu_active_ = false;

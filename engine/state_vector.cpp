@@ -1,15 +1,18 @@
 #include "engine/state_vector.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace kelvin {
 namespace {
 
-realtype weighted_square_sum(N_Vector x, N_Vector w) {
+/// Σ (x w)², and in `weighted` how many w are not zero.
+realtype weighted_square_sum(N_Vector x, N_Vector w, sunindextype* weighted) {
   const sunindextype n = NV_LENGTH_S(x);
   const realtype* a = NV_DATA_S(x);
   const realtype* b = NV_DATA_S(w);
   realtype s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+  sunindextype zeros = 0;
   sunindextype i = 0;
   for (; i + 4 <= n; i += 4) {
     const realtype p0 = a[i] * b[i], p1 = a[i + 1] * b[i + 1];
@@ -18,16 +21,27 @@ realtype weighted_square_sum(N_Vector x, N_Vector w) {
     s1 += p1 * p1;
     s2 += p2 * p2;
     s3 += p3 * p3;
+    zeros += (b[i] == 0) + (b[i + 1] == 0) + (b[i + 2] == 0) + (b[i + 3] == 0);
   }
   for (; i < n; ++i) {
     const realtype p = a[i] * b[i];
     s0 += p * p;
+    zeros += b[i] == 0;
   }
+  if (weighted) *weighted = n - zeros;
   return (s0 + s1) + (s2 + s3);
 }
 
+realtype weighted_square_sum_local(N_Vector x, N_Vector w) {
+  return weighted_square_sum(x, w, nullptr);
+}
+
+/// Components of weight 0 (internal variables that cannot move the body) are
+/// outside the norm: it averages over the others only.
 realtype weighted_rms_norm(N_Vector x, N_Vector w) {
-  return std::sqrt(weighted_square_sum(x, w) / static_cast<realtype>(NV_LENGTH_S(x)));
+  sunindextype weighted = 0;
+  const realtype sum = weighted_square_sum(x, w, &weighted);
+  return std::sqrt(sum / static_cast<realtype>(std::max<sunindextype>(weighted, 1)));
 }
 
 }  // namespace
@@ -35,7 +49,7 @@ realtype weighted_rms_norm(N_Vector x, N_Vector w) {
 N_Vector new_state_vector(long size, SUNContext ctx) {
   N_Vector v = N_VNew_Serial(static_cast<sunindextype>(size), ctx);
   if (v) {
-    v->ops->nvwsqrsumlocal = weighted_square_sum;
+    v->ops->nvwsqrsumlocal = weighted_square_sum_local;
     v->ops->nvwrmsnorm = weighted_rms_norm;
   }
   return v;

@@ -42,7 +42,10 @@ struct MaterialPoint {
   Mat3 Fdot = Mat3::Zero();
   const double* q = nullptr;      // this term's parameters, in params() order
   const double* state = nullptr;  // this element's fixed state (state_size() values), or null
-  int element = -1;               // for messages
+  /// This element's internal variables z (internal_size() values), integrated with
+  /// the motion; null for models without them.
+  const double* internal = nullptr;
+  int element = -1;  // for messages
   /// dP/dF at F = I of this element's elastic terms, supplied by the engine to
   /// models that ask for it (needs_rest_tangent), null otherwise.
   const Mat9* rest_tangent = nullptr;
@@ -53,7 +56,17 @@ struct MaterialResponse {
   Mat9 dPdF = Mat9::Zero();
   Mat9 dPdFdot = Mat9::Zero();
   Mat9X dPdq;  // 9 × params().size()
+  Mat9X dPdz;  // 9 × internal_size(), with kTangent, for models with internal variables
   double energy = 0;
+};
+
+/// The evolution law ż = f(F, z; q) of a model's internal variables at one point,
+/// and on request its derivatives (kTangent: ∂f/∂F, ∂f/∂z; kParamDerivative: ∂f/∂q).
+struct InternalResponse {
+  Eigen::VectorXd rate;  // f, internal_size()
+  Eigen::MatrixXd dF;    // internal_size() × 9
+  Eigen::MatrixXd dz;    // internal_size() × internal_size()
+  Eigen::MatrixXd dq;    // internal_size() × params().size()
 };
 
 class Material {
@@ -69,6 +82,16 @@ class Material {
   /// its size, and the value used where a scenario gives none.
   virtual int state_size() const { return 0; }
   virtual std::vector<double> default_state() const { return {}; }
+  /// Internal variables: per element, integrated with the motion by IDAS (a relaxing
+  /// branch's viscous strain). The stress depends on them (MaterialPoint::internal)
+  /// and they follow ż = f(F, z; q) (evolve). Models without them return 0.
+  virtual int internal_size() const { return 0; }
+  /// The z at which they stay put while F is held (f(F, z) = 0): where a body at
+  /// rest or in static equilibrium starts. Such a term carries no stress there.
+  virtual void relaxed_internal(const Mat3& /*F*/, const double* /*q*/, double* /*z*/) const {}
+  /// Fills `out` with f and the requested derivatives (sized by the model).
+  virtual void evolve(const MaterialPoint& /*in*/, unsigned /*request*/,
+                      InternalResponse& /*out*/) const {}
   /// Stiffness-proportional damping needs the elastic rest tangent C0 of the element
   /// (MaterialPoint::rest_tangent).
   virtual bool needs_rest_tangent() const { return false; }

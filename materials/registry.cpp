@@ -8,6 +8,7 @@
 #include "materials/fiber.hpp"
 #include "materials/fibre_term.hpp"
 #include "materials/material.hpp"
+#include "materials/maxwell.hpp"
 #include "materials/mooney_rivlin.hpp"
 #include "materials/neo_hookean.hpp"
 #include "materials/plugin_loader.hpp"
@@ -40,6 +41,7 @@ const std::map<std::string, Factory>& factories() {
       {"stiffening", [] { return std::make_unique<Stiffening>(); }},
       {"fibre", [] { return std::make_unique<FibreTerm>(); }},
       {"drag", [] { return std::make_unique<Drag>(); }},
+      {"maxwell", [] { return std::make_unique<MaxwellBranch>(); }},
   };
   return f;
 }
