@@ -119,17 +119,19 @@ std::vector<Eigen::Vector3d> screening_directions() {
 }
 
 const std::vector<std::string>& candidate_ids() {
-  static const std::vector<std::string> ids = {"stiffening",       "damping_law",    "drag",
-                                               "inhomogeneity",    "added_mass",     "anisotropy",
-                                               "sync_lag",         "marker_offset",  "registration",
-                                               "clamp_compliance", "discretisation", "unnamed"};
+  static const std::vector<std::string> ids = {
+      "stiffening",       "damping_law",    "drag",     "inhomogeneity", "added_mass",
+      "anisotropy",       "relaxation",     "sync_lag", "marker_offset", "registration",
+      "clamp_compliance", "discretisation", "unnamed"};
   return ids;
 }
 
-const std::vector<std::pair<std::string, std::string>>& unavailable_candidates() {
-  static const std::vector<std::pair<std::string, std::string>> u = {
-      {"relaxation", "a relaxing (Prony / standard-linear-solid) viscous term is not built yet"}};
-  return u;
+std::vector<double> screening_relaxation_times(const Scenario& s) {
+  const double frame = s.time.output_rate > 0 ? 1.0 / s.time.output_rate : s.time.end / 100;
+  std::vector<double> times;
+  for (double tau = 2 * frame; tau <= 0.5 * s.time.end; tau *= 3) times.push_back(tau);
+  if (times.empty()) times.push_back(0.5 * s.time.end);
+  return times;
 }
 
 Candidate custom_candidate(const CustomCandidateSpec& spec) {
@@ -211,20 +213,47 @@ std::vector<Candidate> builtin_candidates(const Scenario& s) {
   Candidate anisotropy;
   anisotropy.id = "anisotropy";
   anisotropy.description = "a fibre term k/2 (‖F a‖² − 1)² along a direction a";
+  anisotropy.alternatives = true;
   anisotropy.extend = [](const Candidate& self, ModelEdits& m, YAML::Node& params, bool screening) {
+    const auto directions = screening_directions();
     if (screening) {
-      for (const auto& a : screening_directions()) {
+      for (const auto& a : directions) {
         const int k = append(m.elastic, fibre(a));
         params.push_back(parameter(fmt::format("elastic[{}].k", k), 0.0));
       }
       return;
     }
-    const int k = append(m.elastic, fibre(self.direction));
+    const int k = append(
+        m.elastic, fibre(self.choice >= 0 ? directions[self.choice] : Eigen::Vector3d::UnitZ()));
     params.push_back(parameter(fmt::format("elastic[{}].k", k), 0.0));
     params.push_back(parameter(fmt::format("elastic[{}].theta", k)));
     params.push_back(parameter(fmt::format("elastic[{}].phi", k)));
   };
   out.push_back(anisotropy);
+
+  Candidate relaxation;
+  relaxation.id = "relaxation";
+  relaxation.description =
+      "a relaxing branch (Maxwell element: modulus g, relaxation time τ; standard linear solid)";
+  relaxation.alternatives = true;
+  const std::vector<double> times = screening_relaxation_times(s);
+  relaxation.extend = [times](const Candidate& self, ModelEdits& m, YAML::Node& params,
+                              bool screening) {
+    const auto branch = [&](double tau) {
+      const int k = append(m.elastic, term("maxwell", {{"g", 0.0}, {"tau", tau}}));
+      params.push_back(parameter(fmt::format("elastic[{}].g", k), 0.0));
+      return k;
+    };
+    if (screening) {
+      for (double tau : times) branch(tau);
+      return;
+    }
+    const int k = branch(times[self.choice >= 0 ? self.choice : times.size() / 2]);
+    YAML::Node tau = parameter(fmt::format("elastic[{}].tau", k));
+    tau["log"] = true;
+    params.push_back(tau);
+  };
+  out.push_back(relaxation);
 
   for (int k = 0; k < static_cast<int>(s.clamps.size()); ++k) {
     const ClampSpec& clamp = s.clamps[k];

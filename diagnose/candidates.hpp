@@ -34,8 +34,11 @@ struct Candidate {
   bool screened = true;
   /// Where the user defined it (diagnose.custom, "file:line:col: key"); "" if built in.
   std::string origin;
-  /// The fibre direction a refit of the anisotropy starts from (screening picks it).
-  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+  /// Screened as alternatives, one parameter entry each (the anisotropy's fibre
+  /// directions, the relaxation's times): `choice` is the one that explained most,
+  /// which the refit starts from (−1 before screening).
+  bool alternatives = false;
+  int choice = -1;
   /// Adds the candidate's terms to `material` and its parameter entries (mappings)
   /// to `parameters`. `screening`: the form scored at the nominal fit (the
   /// anisotropy's moduli along fixed directions) rather than the one refitted.
@@ -70,13 +73,17 @@ Candidate custom_candidate(const CustomCandidateSpec& spec);
 
 /// Identifiers the diagnosis knows, for the `diagnose.candidates` check ("unnamed",
 /// the learned correction of diagnose/learned_correction, is not screened: it is
-/// refitted when no named candidate passes); with those not built yet and why.
+/// refitted when no named candidate passes).
 const std::vector<std::string>& candidate_ids();
-const std::vector<std::pair<std::string, std::string>>& unavailable_candidates();
 
 /// The fibre directions the anisotropy is screened along: axes, face and body
 /// diagonals of the frame (13 directions, a⊗a⊗a⊗a spanning 13 of the 15 fully
 /// symmetric fourth-order tensors).
 std::vector<Eigen::Vector3d> screening_directions();
+
+/// The relaxation times a relaxing branch is screened at: from two frames of the
+/// capture up to half its duration, a factor 3 apart (the branch damps most where
+/// ωτ ≈ 1, so these cover the captured band).
+std::vector<double> screening_relaxation_times(const Scenario& scenario);
 
 }  // namespace kelvin

@@ -90,7 +90,6 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
                {"candidates", "exclude", "custom", "refits", "refit_evaluations", "significance",
                 "validate", "missing_force"});
   std::vector<std::string> known = candidate_ids();
-  for (const auto& [id, why] : unavailable_candidates()) known.push_back(id);
   if (const YAML::Node c = n["custom"]) {
     d.require_sequence(c, join(P, "custom"));
     for (std::size_t i = 0; i < c.size(); ++i) {
@@ -104,8 +103,6 @@ DiagnoseSettings load_diagnose_settings(const std::string& path) {
     for (std::size_t i = 0; i < c.size(); ++i) {
       const std::string key = yamlutil::index(join(P, "candidates"), i);
       const std::string id = d.choice(c[i], key, known);
-      for (const auto& [missing, why] : unavailable_candidates())
-        if (id == missing) d.fail(c[i], key, fmt::format("'{}' cannot be screened: {}", id, why));
       if (id == "unnamed")
         s.learned_correction = true;
       else

@@ -549,18 +549,19 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   }
   d.ranking =
       rank_candidates(g.residual, g.jacobian, range(n_nominal), groups, so, d.settings.alpha);
-  // The anisotropy is refitted along the screened direction that explains most,
-  // from that direction's Gauss–Newton step.
+  // A candidate screened as alternatives (the anisotropy's directions, the
+  // relaxation's times) is refitted from the one that explains most, from its
+  // Gauss–Newton step.
   std::map<int, CandidateScore> start_scores;
   for (std::size_t c = 0; c < all.size(); ++c) {
-    if (d.candidates[c].id != "anisotropy") continue;
+    if (!d.candidates[c].alternatives) continue;
     std::vector<std::pair<std::string, std::vector<int>>> single;
     for (int j : groups[c].second) single.push_back({smap.label(j), {j}});
     const auto s = score_candidates(g.residual, g.jacobian, range(n_nominal), single, so);
     int best = 0;
     for (std::size_t k = 1; k < s.size(); ++k)
       if (s[k].predicted_drop > s[best].predicted_drop) best = static_cast<int>(k);
-    d.candidates[c].direction = screening_directions()[best];
+    d.candidates[c].choice = best;
     start_scores[static_cast<int>(c)] = s[best];
   }
   d.seconds.screening += since(t0);

@@ -192,15 +192,6 @@ std::string diagnosis_json(const Diagnosis& d) {
                    json_string(candidate_name(d, c.a)), json_string(candidate_name(d, c.b)),
                    json_number(c.correlation));
   }
-  j += "],\n    \"not_screened\": [";
-  {
-    bool first = true;
-    for (const auto& [id, why] : unavailable_candidates()) {
-      fmt::format_to(out, "{}{{\"candidate\": {}, \"why\": {}}}", first ? "" : ", ",
-                     json_string(id), json_string(why));
-      first = false;
-    }
-  }
   j += "]},\n  \"second_screening\": [";
   for (std::size_t k = 0; k < d.second_ranking.order.size(); ++k) {
     const auto& r = d.second_ranking.order[k];
@@ -563,8 +554,6 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
                    "cannot tell them apart; a motion that excites them differently (another "
                    "frequency, amplitude or direction) would.\n",
                    candidate_name(d, c.a), candidate_name(d, c.b), c.correlation);
-  r += "\nNot screened:\n\n";
-  for (const auto& [id, why] : unavailable_candidates()) fmt::format_to(out, "- {}: {}\n", id, why);
   r += "\n## How far: refits\n\n"
        "| candidate | train rms (mm) | LR statistic | threshold | held-out rms (mm) | held-out "
        "drop / threshold | where | parameters |\n|---|---:|---:|---:|---:|---:|---|---|\n";
