@@ -18,7 +18,7 @@
 extern "C" {
 #endif
 
-#define KELVIN_PLUGIN_ABI_MAJOR 1
+#define KELVIN_PLUGIN_ABI_MAJOR 2
 #define KELVIN_PLUGIN_ABI_MINOR 0
 #define KELVIN_PLUGIN_ABI_PATCH 0
 #define KELVIN_PLUGIN_ABI_VERSION                                                \
@@ -34,10 +34,11 @@ typedef struct kelvin_param_info {
 } kelvin_param_info;
 
 typedef struct kelvin_material_point {
-  const double* F;     /* 9 */
-  const double* Fdot;  /* 9 */
-  const double* q;     /* num_params */
-  const double* state; /* state_size, or NULL */
+  const double* F;        /* 9 */
+  const double* Fdot;     /* 9 */
+  const double* q;        /* num_params */
+  const double* state;    /* state_size, or NULL */
+  const double* internal; /* internal_size, or NULL (a material check: relaxed at rest) */
   int element;
 } kelvin_material_point;
 
@@ -47,8 +48,17 @@ typedef struct kelvin_material_response {
   double* dPdF;    /* 81 */
   double* dPdFdot; /* 81 */
   double* dPdq;    /* 9 × num_params */
+  double* dPdz;    /* 9 × internal_size, with the tangent of a model with internal variables */
   double* energy;  /* 1 */
 } kelvin_material_response;
+
+/* The internal variables' evolution z' = f(F, z; q); requested outputs are non-NULL. */
+typedef struct kelvin_internal_response {
+  double* rate; /* internal_size */
+  double* dF;   /* internal_size × 9 */
+  double* dz;   /* internal_size × internal_size */
+  double* dq;   /* internal_size × num_params */
+} kelvin_internal_response;
 
 enum kelvin_status {
   KELVIN_OK = 0,
@@ -67,6 +77,13 @@ typedef struct kelvin_material_desc {
   /* Returns a kelvin_status; on KELVIN_FAILED writes a message to msg (msg_size bytes). */
   int (*evaluate)(const kelvin_material_point* in, unsigned request, kelvin_material_response* out,
                   char* msg, int msg_size);
+  /* Internal variables per element, integrated with the motion (0: none, and the two
+   * functions below may be NULL): the state relaxed at F (f = 0 with F held), and the
+   * evolution law. Both return a kelvin_status. */
+  int internal_size;
+  int (*relaxed_internal)(const double* F, const double* q, double* z, char* msg, int msg_size);
+  int (*evolve)(const kelvin_material_point* in, unsigned request, kelvin_internal_response* out,
+                char* msg, int msg_size);
 } kelvin_material_desc;
 
 typedef uint32_t (*kelvin_plugin_abi_version_fn)(void);

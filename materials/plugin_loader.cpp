@@ -77,6 +77,9 @@ class PluginMaterial final : public Material {
     }
     if (d->state_size > 0 && d->default_state)
       state_.assign(d->default_state, d->default_state + d->state_size);
+    if (d->internal_size < 0 || (d->internal_size > 0 && (!d->relaxed_internal || !d->evolve)))
+      throw Error(who_ + " declares " + std::to_string(d->internal_size) +
+                  " internal variables but not both relaxed_internal and evolve");
   }
   std::string name() const override { return d_->name; }
   const std::vector<ParamInfo>& params() const override { return params_; }
@@ -84,16 +87,58 @@ class PluginMaterial final : public Material {
   bool has_energy() const override { return d_->has_energy != 0; }
   int state_size() const override { return d_->state_size; }
   std::vector<double> default_state() const override { return state_; }
+  int internal_size() const override { return d_->internal_size; }
+
+  void relaxed_internal(const Mat3& F, const double* q, double* z) const override {
+    char msg[512];
+    msg[0] = '\0';
+    enter_plugin_call(who_.c_str(), -1);
+    const int status = d_->relaxed_internal(F.data(), q, z, msg, sizeof msg);
+    leave_plugin_call();
+    if (status != KELVIN_OK)
+      throw Error(who_ + ": its relaxed internal state failed at F = " + format_tensor(F.data()) +
+                  ": " + (msg[0] ? std::string(msg) : "no message"));
+    check_finite("the relaxed internal state", z, d_->internal_size, F.data(), -1);
+  }
+
+  void evolve(const MaterialPoint& in, unsigned request, InternalResponse& out) const override {
+    const int m = d_->internal_size, nq = d_->num_params;
+    out.rate.resize(m);
+    if (request & kTangent) {
+      out.dF.resize(m, 9);
+      out.dz.resize(m, m);
+    }
+    if (request & kParamDerivative) out.dq.resize(m, nq);
+    kelvin_material_point p{in.F.data(), in.Fdot.data(), in.q, in.state, in.internal, in.element};
+    kelvin_internal_response r{out.rate.data(), (request & kTangent) ? out.dF.data() : nullptr,
+                               (request & kTangent) ? out.dz.data() : nullptr,
+                               (request & kParamDerivative) ? out.dq.data() : nullptr};
+    char msg[512];
+    msg[0] = '\0';
+    enter_plugin_call(who_.c_str(), in.element);
+    const int status = d_->evolve(&p, request, &r, msg, sizeof msg);
+    leave_plugin_call();
+    if (status != KELVIN_OK)
+      throw Error(where(in) + ": its internal variables' law failed: " +
+                  (msg[0] ? std::string(msg) : "no message"));
+    check_finite("the internal variables' rate", r.rate, m, in.F.data(), in.element);
+    check_finite("d(rate)/dF", r.dF, 9L * m, in.F.data(), in.element);
+    check_finite("d(rate)/dz", r.dz, static_cast<long>(m) * m, in.F.data(), in.element);
+    check_finite("d(rate)/dq", r.dq, static_cast<long>(m) * nq, in.F.data(), in.element);
+  }
 
   bool evaluate(const MaterialPoint& in, unsigned request, MaterialResponse& out) const override {
-    kelvin_material_point p{in.F.data(), in.Fdot.data(), in.q, in.state, in.element};
-    const int nq = d_->num_params;
+    kelvin_material_point p{in.F.data(), in.Fdot.data(), in.q, in.state, in.internal, in.element};
+    const int nq = d_->num_params, m = d_->internal_size;
     if (request & kParamDerivative) out.dPdq.resize(9, nq);
+    const bool dPdz = (request & kTangent) && m > 0;
+    if (dPdz) out.dPdz.resize(9, m);
     kelvin_material_response r{
         (request & kStress) ? out.P.data() : nullptr,
         (request & kTangent) ? out.dPdF.data() : nullptr,
         (request & kRateTangent) ? out.dPdFdot.data() : nullptr,
         (request & kParamDerivative) ? out.dPdq.data() : nullptr,
+        dPdz ? out.dPdz.data() : nullptr,
         (request & kEnergy) ? &out.energy : nullptr,
     };
     char msg[512];
@@ -116,11 +161,19 @@ class PluginMaterial final : public Material {
     check("dP/dF", r.dPdF, 81);
     check("dP/dFdot", r.dPdFdot, 81);
     check("dP/dq", r.dPdq, 9L * nq);
+    check("dP/dz", r.dPdz, 9L * m);
     check("the energy", r.energy, 1);
     return true;
   }
 
  private:
+  void check_finite(const char* what, const double* a, long size, const double* F,
+                    int element) const {
+    if (a && !std::isfinite((Eigen::Map<const Eigen::ArrayXd>(a, size) * 0.0).sum()))
+      throw Error(who_ + " at element " + std::to_string(element) +
+                  " with F = " + format_tensor(F) + " returned a non-finite value in " + what);
+  }
+
   std::string where(const MaterialPoint& in) const {
     return "plugin material '" + name() + "' (" + lib_->path + ") at element " +
            std::to_string(in.element) + " with F = " + format_tensor(in.F.data()) +

@@ -33,6 +33,20 @@ inline MaterialResponse& scratch_response() {
   return other;
 }
 
+inline InternalResponse& scratch_internal() {
+  static const pthread_t first = pthread_self();
+  static InternalResponse first_thread;
+  if (pthread_equal(pthread_self(), first)) return first_thread;
+  thread_local InternalResponse other;
+  return other;
+}
+
+/// Writes an exception's message into the C message buffer.
+inline void write_message(const char* what, char* msg, int msg_size) {
+  std::strncpy(msg, what, msg_size > 0 ? msg_size - 1 : 0);
+  if (msg_size > 0) msg[msg_size - 1] = '\0';
+}
+
 /// Owns one model and its C description (the strings live as long as the plugin).
 class Exported {
  public:
@@ -49,7 +63,10 @@ class Exported {
     desc_.has_energy = model_->has_energy() ? 1 : 0;
     desc_.state_size = model_->state_size();
     desc_.default_state = state_.data();
-    desc_.evaluate = nullptr;  // set by the registry to a per-slot trampoline
+    desc_.evaluate = nullptr;  // set by the registry to per-slot trampolines, as the two below
+    desc_.internal_size = model_->internal_size();
+    desc_.relaxed_internal = nullptr;
+    desc_.evolve = nullptr;
   }
   const Material& model() const { return *model_; }
   kelvin_material_desc& desc() { return desc_; }
@@ -62,6 +79,7 @@ class Exported {
       p.Fdot = Eigen::Map<const Mat3>(in->Fdot);
       p.q = in->q;
       p.state = in->state;
+      p.internal = in->internal;
       p.element = in->element;
       MaterialResponse& r = scratch_response();
       if (!model_->evaluate(p, request, r)) return KELVIN_INADMISSIBLE;
@@ -70,14 +88,55 @@ class Exported {
       if (out->dPdFdot) Eigen::Map<Mat9>(out->dPdFdot) = r.dPdFdot;
       if (out->dPdq && r.dPdq.size())
         std::memcpy(out->dPdq, r.dPdq.data(), sizeof(double) * r.dPdq.size());
+      if (out->dPdz && r.dPdz.size())
+        std::memcpy(out->dPdz, r.dPdz.data(), sizeof(double) * r.dPdz.size());
       if (out->energy) *out->energy = r.energy;
       return KELVIN_OK;
     } catch (const std::exception& e) {
-      std::strncpy(msg, e.what(), msg_size > 0 ? msg_size - 1 : 0);
-      if (msg_size > 0) msg[msg_size - 1] = '\0';
+      write_message(e.what(), msg, msg_size);
     } catch (...) {
-      std::strncpy(msg, "unknown exception", msg_size > 0 ? msg_size - 1 : 0);
-      if (msg_size > 0) msg[msg_size - 1] = '\0';
+      write_message("unknown exception", msg, msg_size);
+    }
+    return KELVIN_FAILED;
+  }
+
+  int relaxed_internal(const double* F, const double* q, double* z, char* msg,
+                       int msg_size) const noexcept {
+    try {
+      model_->relaxed_internal(Eigen::Map<const Mat3>(F), q, z);
+      return KELVIN_OK;
+    } catch (const std::exception& e) {
+      write_message(e.what(), msg, msg_size);
+    } catch (...) {
+      write_message("unknown exception", msg, msg_size);
+    }
+    return KELVIN_FAILED;
+  }
+
+  int evolve(const kelvin_material_point* in, unsigned request, kelvin_internal_response* out,
+             char* msg, int msg_size) const noexcept {
+    try {
+      MaterialPoint p;
+      p.F = Eigen::Map<const Mat3>(in->F);
+      p.Fdot = Eigen::Map<const Mat3>(in->Fdot);
+      p.q = in->q;
+      p.state = in->state;
+      p.internal = in->internal;
+      p.element = in->element;
+      InternalResponse& r = scratch_internal();
+      model_->evolve(p, request, r);
+      const auto copy = [](double* to, const auto& from) {
+        if (to && from.size()) std::memcpy(to, from.data(), sizeof(double) * from.size());
+      };
+      copy(out->rate, r.rate);
+      copy(out->dF, r.dF);
+      copy(out->dz, r.dz);
+      copy(out->dq, r.dq);
+      return KELVIN_OK;
+    } catch (const std::exception& e) {
+      write_message(e.what(), msg, msg_size);
+    } catch (...) {
+      write_message("unknown exception", msg, msg_size);
     }
     return KELVIN_FAILED;
   }
@@ -102,10 +161,30 @@ int trampoline(const kelvin_material_point* in, unsigned request, kelvin_materia
   return exported()[Slot]->evaluate(in, request, out, msg, msg_size);
 }
 
+template <int Slot>
+int relaxed_trampoline(const double* F, const double* q, double* z, char* msg, int msg_size) {
+  return exported()[Slot]->relaxed_internal(F, q, z, msg, msg_size);
+}
+
+template <int Slot>
+int evolve_trampoline(const kelvin_material_point* in, unsigned request,
+                      kelvin_internal_response* out, char* msg, int msg_size) {
+  return exported()[Slot]->evolve(in, request, out, msg, msg_size);
+}
+
+template <int Slot>
+void set_trampolines(kelvin_material_desc& d) {
+  d.evaluate = &trampoline<Slot>;
+  if (d.internal_size > 0) {
+    d.relaxed_internal = &relaxed_trampoline<Slot>;
+    d.evolve = &evolve_trampoline<Slot>;
+  }
+}
+
 template <class... Models, int... Slots>
 void register_models(std::integer_sequence<int, Slots...>) {
   (exported().push_back(std::make_unique<Exported>(std::make_unique<Models>())), ...);
-  ((exported()[Slots]->desc().evaluate = &trampoline<Slots>), ...);
+  (set_trampolines<Slots>(exported()[Slots]->desc()), ...);
 }
 
 template <class... Models>

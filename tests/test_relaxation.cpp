@@ -162,4 +162,39 @@ TEST(Relaxation, TheFitFindsTheBranchFromZeroModulus) {
   EXPECT_NEAR(problem.map().value(out.p, 1), 0.01, 0.02 * 0.01) << out.stop_reason;
 }
 
+TEST(Relaxation, APluginWithInternalVariablesIntegratesAsTheBuiltInOne) {
+  // The same branch through the plugin ABI (tests/plugins/relaxing.cpp): the same
+  // trajectory, misfit and adjoint gradient to the last bit.
+  const fs::path dir = test::scratch("relaxation-plugin");
+  const std::string tracks =
+      test::simulate_tracks(dir, "truth", bar(with_branch("g: 8.0e4, tau: 0.01")));
+  const std::string fit = R"(fit:
+  parameters:
+    - { target: elastic.g, lower: 0 }
+    - { target: elastic.tau, log: true })";
+  test::write_text(dir / "builtin.yaml",
+                   bar(with_branch("g: 5.0e4, tau: 0.02"), "static", tracks, 0.1, fit));
+  test::write_text(
+      dir / "plugin.yaml",
+      bar(with_branch(fmt::format("g: 5.0e4, tau: 0.02, plugin: {}", KELVIN_RELAXING_PLUGIN)),
+          "static", tracks, 0.1, fit));
+  GradientOptions o;
+  o.method = GradientMethod::kAdjoint;
+  o.segment = 1;
+  Eigen::VectorXd g[2];
+  double phi[2];
+  int k = 0;
+  for (const char* name : {"builtin.yaml", "plugin.yaml"}) {
+    const Scenario s = load_scenario((dir / name).string());
+    FitProblem problem(s, s.fit.parameters);
+    const Evaluation e = problem.evaluate(problem.map().initial(), o);
+    ASSERT_TRUE(e.ok) << name << ": " << e.error;
+    phi[k] = e.phi;
+    g[k++] = e.gradient;
+  }
+  EXPECT_EQ(phi[1], phi[0]);
+  EXPECT_EQ(g[1], g[0]);
+  EXPECT_GT(g[0].norm(), 0);
+}
+
 }  // namespace kelvin
