@@ -73,17 +73,10 @@ void DaeSystem::add_internal_product(const double* s, double* r) const {
   const auto& blocks = model_.internal_blocks();
   for (size_t k = 0; k < blocks.size(); ++k) {
     const InternalBlock& b = blocks[k];
-    Eigen::Matrix<double, 12, 1> se;
-    for (int j = 0; j < 12; ++j) {
-      const int d = model_.element_dof(b.element, j);
-      se[j] = d >= 0 ? s[d] : 0.0;
-    }
     const Eigen::Map<const Eigen::VectorXd> sz(s + 2 * n_ + b.offset, b.size);
-    const Eigen::Matrix<double, 12, 1> f = internal_.Kxz[k] * sz;
-    for (int j = 0; j < 12; ++j)
-      if (const int d = model_.element_dof(b.element, j); d >= 0) r[n_ + d] += f[j];
+    model_.add_element_values(b.element, internal_.Kxz[k] * sz, r + n_);
     Eigen::Map<Eigen::VectorXd>(r + 2 * n_ + b.offset, b.size) -=
-        internal_.fx[k] * se + internal_.fz[k] * sz;
+        internal_.fx[k] * model_.element_values(b.element, s) + internal_.fz[k] * sz;
   }
 }
 
@@ -91,17 +84,11 @@ void DaeSystem::add_internal_adjoint_terms(const double* lambda, double* r) cons
   const auto& blocks = model_.internal_blocks();
   for (size_t k = 0; k < blocks.size(); ++k) {
     const InternalBlock& b = blocks[k];
-    Eigen::Matrix<double, 12, 1> lv;
-    for (int j = 0; j < 12; ++j) {
-      const int d = model_.element_dof(b.element, j);
-      lv[j] = d >= 0 ? lambda[n_ + d] : 0.0;
-    }
     const Eigen::Map<const Eigen::VectorXd> lz(lambda + 2 * n_ + b.offset, b.size);
-    const Eigen::Matrix<double, 12, 1> f = internal_.fx[k].transpose() * lz;
-    for (int j = 0; j < 12; ++j)
-      if (const int d = model_.element_dof(b.element, j); d >= 0) r[d] += f[j];
+    model_.add_element_values(b.element, internal_.fx[k].transpose() * lz, r);
     Eigen::Map<Eigen::VectorXd>(r + 2 * n_ + b.offset, b.size) +=
-        internal_.fz[k].transpose() * lz - internal_.Kxz[k].transpose() * lv;
+        internal_.fz[k].transpose() * lz -
+        internal_.Kxz[k].transpose() * model_.element_values(b.element, lambda + n_);
   }
 }
 

@@ -256,6 +256,20 @@ class FemModel {
   void scatter_element_matrix(int e, const Eigen::Matrix<double, 12, 12>& A, double* values) const;
   /// Free dof of element e's local dof k = 3a + i, or −1 for a clamped one.
   int element_dof(int e, int k) const { return dof(elements_[e].nodes[k / 3], k % 3); }
+  /// Element e's 12 values of a free-dof vector (0 at clamped dofs), and the
+  /// scatter-add of 12 element values into one.
+  Eigen::Matrix<double, 12, 1> element_values(int e, const double* free) const {
+    Eigen::Matrix<double, 12, 1> v;
+    for (int k = 0; k < 12; ++k) {
+      const int d = element_dof(e, k);
+      v[k] = d >= 0 ? free[d] : 0.0;
+    }
+    return v;
+  }
+  void add_element_values(int e, const Eigen::Matrix<double, 12, 1>& v, double* free) const {
+    for (int k = 0; k < 12; ++k)
+      if (const int d = element_dof(e, k); d >= 0) free[d] += v[k];
+  }
   /// K and D values in pattern() order from element tangents.
   void assemble_tangents(const ElementTangents& t, std::vector<double>& K, std::vector<double>& D,
                          ElementSlots& slots) const;

@@ -65,12 +65,8 @@ void FemModel::relaxed_internal_change(const Eigen::Matrix3Xd& x, const double* 
   const InternalLinearisation lin = relaxed_linearisation(x);
   for (size_t k = 0; k < internal_blocks_.size(); ++k) {
     const InternalBlock& b = internal_blocks_[k];
-    Eigen::Matrix<double, 12, 1> dxe;
-    for (int j = 0; j < 12; ++j) {
-      const int d = element_dof(b.element, j);
-      dxe[j] = d >= 0 ? dx_free[d] : 0.0;
-    }
-    Eigen::Map<Eigen::VectorXd>(dz + b.offset, b.size) = -lin.fz[k].lu().solve(lin.fx[k] * dxe);
+    Eigen::Map<Eigen::VectorXd>(dz + b.offset, b.size) =
+        -lin.fz[k].lu().solve(lin.fx[k] * element_values(b.element, dx_free));
   }
 }
 
@@ -105,10 +101,8 @@ void FemModel::relaxed_internal_change_transpose(const Eigen::Matrix3Xd& x, cons
   for (size_t k = 0; k < internal_blocks_.size(); ++k) {
     const InternalBlock& b = internal_blocks_[k];
     const Eigen::Map<const Eigen::VectorXd> l(lz + b.offset, b.size);
-    const Eigen::Matrix<double, 12, 1> f =
-        -lin.fx[k].transpose() * lin.fz[k].transpose().lu().solve(l);
-    for (int j = 0; j < 12; ++j)
-      if (const int d = element_dof(b.element, j); d >= 0) out_free[d] += f[j];
+    add_element_values(b.element, -lin.fx[k].transpose() * lin.fz[k].transpose().lu().solve(l),
+                       out_free);
   }
 }
 

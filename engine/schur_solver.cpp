@@ -140,15 +140,6 @@ bool SchurSolver::factorize() {
   return k.numeric != nullptr;
 }
 
-Eigen::Matrix<double, 12, 1> SchurSolver::element_values(int e, const double* u) const {
-  Eigen::Matrix<double, 12, 1> ue;
-  for (int k = 0; k < 12; ++k) {
-    const int d = dae_.model().element_dof(e, k);
-    ue[k] = d >= 0 ? u[d] : 0.0;
-  }
-  return ue;
-}
-
 void SchurSolver::solve(const double* b, double* x) {
   const FemModel& model = dae_.model();
   const SparsePattern& P = model.pattern();
@@ -162,10 +153,10 @@ void SchurSolver::solve(const double* b, double* x) {
   const double* r3 = b + 2 * n_;
   for (size_t k = 0; k < blocks.size(); ++k) {  // − K_xz A⁻¹ r₃
     const InternalBlock& blk = blocks[k];
-    const Eigen::Matrix<double, 12, 1> f =
-        Kxz_[k] * (A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size));
-    for (int j = 0; j < 12; ++j)
-      if (const int d = model.element_dof(blk.element, j); d >= 0) rhs_[d] -= f[j];
+    model.add_element_values(
+        blk.element,
+        -Kxz_[k] * (A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size)),
+        rhs_.data());
   }
   apply_inverse(rhs_.data(), false);
   // x₃ before x₁, x₂: the right-hand side may alias the solution.
@@ -173,7 +164,7 @@ void SchurSolver::solve(const double* b, double* x) {
     const InternalBlock& blk = blocks[k];
     const Eigen::VectorXd z =
         A_inv_[k] * (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
-                     fx_[k] * element_values(blk.element, rhs_.data()));
+                     fx_[k] * model.element_values(blk.element, rhs_.data()));
     Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blk.offset, blk.size) = z;
   }
   for (int i = 0; i < n_; ++i) {
@@ -192,11 +183,11 @@ void SchurSolver::solve_adjoint(const double* b, double* x) {
   const double* r3 = b + 2 * n_;
   for (size_t k = 0; k < blocks.size(); ++k) {  // − f_xᵀ A⁻ᵀ r₃
     const InternalBlock& blk = blocks[k];
-    const Eigen::Matrix<double, 12, 1> f =
-        fx_[k].transpose() *
-        (A_inv_[k].transpose() * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size));
-    for (int j = 0; j < 12; ++j)
-      if (const int d = model.element_dof(blk.element, j); d >= 0) rhs_[d] -= f[j];
+    model.add_element_values(
+        blk.element,
+        -fx_[k].transpose() *
+            (A_inv_[k].transpose() * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size)),
+        rhs_.data());
   }
   apply_inverse(rhs_.data(), true);
   // x₃ = −A⁻ᵀ(r₃ + K_xzᵀ x₂), and f_xᵀ x₃ for x₁, before x is written (it may alias b).
@@ -204,12 +195,10 @@ void SchurSolver::solve_adjoint(const double* b, double* x) {
   std::vector<Eigen::VectorXd> z(blocks.size());
   for (size_t k = 0; k < blocks.size(); ++k) {
     const InternalBlock& blk = blocks[k];
-    z[k] =
-        -A_inv_[k].transpose() * (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
-                                  Kxz_[k].transpose() * element_values(blk.element, rhs_.data()));
-    const Eigen::Matrix<double, 12, 1> f = fx_[k].transpose() * z[k];
-    for (int j = 0; j < 12; ++j)
-      if (const int d = model.element_dof(blk.element, j); d >= 0) fx3[d] += f[j];
+    z[k] = -A_inv_[k].transpose() *
+           (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
+            Kxz_[k].transpose() * model.element_values(blk.element, rhs_.data()));
+    model.add_element_values(blk.element, fx_[k].transpose() * z[k], fx3.data());
   }
   for (size_t k = 0; k < blocks.size(); ++k)
     Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blocks[k].offset, blocks[k].size) = z[k];

@@ -71,8 +71,6 @@ class SchurSolver {
   std::vector<Eigen::MatrixXd> A_inv_;
   std::vector<Eigen::Matrix<double, 12, Eigen::Dynamic>> Kxz_;
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 12>> fx_;
-  /// Element values of a free-dof vector (0 at clamped dofs).
-  Eigen::Matrix<double, 12, 1> element_values(int e, const double* u) const;
   std::unique_ptr<Klu> klu_;
   std::unique_ptr<Cholmod> cholmod_;
   bool lu_active_ = false;

@@ -47,6 +47,32 @@ inline void write_message(const char* what, char* msg, int msg_size) {
   if (msg_size > 0) msg[msg_size - 1] = '\0';
 }
 
+/// kelvin's material point from the C one.
+inline MaterialPoint material_point(const kelvin_material_point* in) {
+  MaterialPoint p;
+  p.F = Eigen::Map<const Mat3>(in->F);
+  p.Fdot = Eigen::Map<const Mat3>(in->Fdot);
+  p.q = in->q;
+  p.state = in->state;
+  p.internal = in->internal;
+  p.element = in->element;
+  return p;
+}
+
+/// Runs body() (a kelvin_status) with exceptions turned into KELVIN_FAILED and the
+/// message: none may cross the C boundary.
+template <class Body>
+int guarded(char* msg, int msg_size, Body body) noexcept {
+  try {
+    return body();
+  } catch (const std::exception& e) {
+    write_message(e.what(), msg, msg_size);
+  } catch (...) {
+    write_message("unknown exception", msg, msg_size);
+  }
+  return KELVIN_FAILED;
+}
+
 /// Owns one model and its C description (the strings live as long as the plugin).
 class Exported {
  public:
@@ -73,75 +99,47 @@ class Exported {
 
   int evaluate(const kelvin_material_point* in, unsigned request, kelvin_material_response* out,
                char* msg, int msg_size) const noexcept {
-    try {
-      MaterialPoint p;
-      p.F = Eigen::Map<const Mat3>(in->F);
-      p.Fdot = Eigen::Map<const Mat3>(in->Fdot);
-      p.q = in->q;
-      p.state = in->state;
-      p.internal = in->internal;
-      p.element = in->element;
+    return guarded(msg, msg_size, [&] {
       MaterialResponse& r = scratch_response();
-      if (!model_->evaluate(p, request, r)) return KELVIN_INADMISSIBLE;
+      if (!model_->evaluate(material_point(in), request, r)) return KELVIN_INADMISSIBLE;
       if (out->P) Eigen::Map<Mat3>(out->P) = r.P;
       if (out->dPdF) Eigen::Map<Mat9>(out->dPdF) = r.dPdF;
       if (out->dPdFdot) Eigen::Map<Mat9>(out->dPdFdot) = r.dPdFdot;
-      if (out->dPdq && r.dPdq.size())
-        std::memcpy(out->dPdq, r.dPdq.data(), sizeof(double) * r.dPdq.size());
-      if (out->dPdz && r.dPdz.size())
-        std::memcpy(out->dPdz, r.dPdz.data(), sizeof(double) * r.dPdz.size());
+      copy(out->dPdq, r.dPdq);
+      copy(out->dPdz, r.dPdz);
       if (out->energy) *out->energy = r.energy;
       return KELVIN_OK;
-    } catch (const std::exception& e) {
-      write_message(e.what(), msg, msg_size);
-    } catch (...) {
-      write_message("unknown exception", msg, msg_size);
-    }
-    return KELVIN_FAILED;
+    });
   }
 
   int relaxed_internal(const double* F, const double* q, double* z, char* msg,
                        int msg_size) const noexcept {
-    try {
+    return guarded(msg, msg_size, [&] {
       model_->relaxed_internal(Eigen::Map<const Mat3>(F), q, z);
       return KELVIN_OK;
-    } catch (const std::exception& e) {
-      write_message(e.what(), msg, msg_size);
-    } catch (...) {
-      write_message("unknown exception", msg, msg_size);
-    }
-    return KELVIN_FAILED;
+    });
   }
 
   int evolve(const kelvin_material_point* in, unsigned request, kelvin_internal_response* out,
              char* msg, int msg_size) const noexcept {
-    try {
-      MaterialPoint p;
-      p.F = Eigen::Map<const Mat3>(in->F);
-      p.Fdot = Eigen::Map<const Mat3>(in->Fdot);
-      p.q = in->q;
-      p.state = in->state;
-      p.internal = in->internal;
-      p.element = in->element;
+    return guarded(msg, msg_size, [&] {
       InternalResponse& r = scratch_internal();
-      model_->evolve(p, request, r);
-      const auto copy = [](double* to, const auto& from) {
-        if (to && from.size()) std::memcpy(to, from.data(), sizeof(double) * from.size());
-      };
+      model_->evolve(material_point(in), request, r);
       copy(out->rate, r.rate);
       copy(out->dF, r.dF);
       copy(out->dz, r.dz);
       copy(out->dq, r.dq);
       return KELVIN_OK;
-    } catch (const std::exception& e) {
-      write_message(e.what(), msg, msg_size);
-    } catch (...) {
-      write_message("unknown exception", msg, msg_size);
-    }
-    return KELVIN_FAILED;
+    });
   }
 
  private:
+  /// A requested (non-null) output array gets a dynamic-size result's values.
+  template <class Matrix>
+  static void copy(double* to, const Matrix& from) {
+    if (to && from.size()) std::memcpy(to, from.data(), sizeof(double) * from.size());
+  }
+
   std::unique_ptr<Material> model_;
   std::string name_;
   std::vector<kelvin_param_info> params_;
