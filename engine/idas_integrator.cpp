@@ -227,10 +227,10 @@ void IdasIntegrator::initialize(double t0, const Eigen::VectorXd& x0, const Eige
   const int n = m.n, nz = m.size - 2 * n;
   if (n == 0) throw Error("every node is clamped: there is nothing to simulate");
   check_sundials(SUNContext_Create(nullptr, &m.ctx), "SUNContext_Create");
-  m.y = new_state_vector(m.size, m.ctx);
-  m.yp = new_state_vector(m.size, m.ctx);
-  m.yout = new_state_vector(m.size, m.ctx);
-  m.atol = new_state_vector(m.size, m.ctx);
+  m.y = new_state_vector(m.size, m.ctx, nz > 0);
+  m.yp = new_state_vector(m.size, m.ctx, nz > 0);
+  m.yout = new_state_vector(m.size, m.ctx, nz > 0);
+  m.atol = new_state_vector(m.size, m.ctx, nz > 0);
   double* y = N_VGetArrayPointer(m.y);
   double* yp = N_VGetArrayPointer(m.yp);
   Eigen::Map<Eigen::VectorXd>(y, n) = x0;

@@ -9,7 +9,9 @@
 
 namespace kelvin {
 
-/// N_VNew_Serial(size, ctx) with the norms replaced; clones inherit them.
-N_Vector new_state_vector(long size, SUNContext ctx);
+/// N_VNew_Serial(size, ctx) with the norms replaced; clones inherit them. With
+/// `zero_weights` the WRMS norm averages over the components of non-zero weight only
+/// (a state with internal variables that may weigh nothing).
+N_Vector new_state_vector(long size, SUNContext ctx, bool zero_weights = false);
 
 }  // namespace kelvin
