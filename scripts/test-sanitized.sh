@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 TESTS=(test_mesh test_markers test_csv test_capture test_rigid_motion test_cubic_spline
        test_output test_scenario test_scenario_fit test_materials test_assembly
-       test_bad_inputs test_cli test_clamp_compliance test_fitted_scenario)
+       test_bad_inputs test_cli test_clamp_compliance test_fitted_scenario test_relaxation)
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DKELVIN_SANITIZE=ON \
   -DKELVIN_BUILD_BENCH=OFF >/dev/null
 cmake --build build-asan -j2 --target kelvin "${TESTS[@]}"
