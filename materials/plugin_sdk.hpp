@@ -21,23 +21,17 @@
 
 namespace kelvin::plugin {
 
-/// Response reused across calls: a fresh one zero-fills 171 doubles each time.
-/// The first evaluating thread gets a plain static (a thread_local in a dlopen'ed
-/// module costs a __tls_get_addr call, 3% of a neo-Hookean assembly); any other
-/// thread gets its own thread_local, so concurrent evaluation stays safe.
-inline MaterialResponse& scratch_response() {
+/// A response (MaterialResponse, InternalResponse) reused across calls: a fresh
+/// MaterialResponse zero-fills 171 doubles each time. The first thread to ask gets a
+/// plain static (a thread_local in a dlopen'ed module costs a __tls_get_addr call, 3%
+/// of a neo-Hookean assembly); any other thread gets its own thread_local, so
+/// concurrent evaluation stays safe.
+template <class Response>
+Response& scratch() {
   static const pthread_t first = pthread_self();
-  static MaterialResponse first_thread;
+  static Response first_thread;
   if (pthread_equal(pthread_self(), first)) return first_thread;
-  thread_local MaterialResponse other;
-  return other;
-}
-
-inline InternalResponse& scratch_internal() {
-  static const pthread_t first = pthread_self();
-  static InternalResponse first_thread;
-  if (pthread_equal(pthread_self(), first)) return first_thread;
-  thread_local InternalResponse other;
+  thread_local Response other;
   return other;
 }
 
@@ -100,7 +94,7 @@ class Exported {
   int evaluate(const kelvin_material_point* in, unsigned request, kelvin_material_response* out,
                char* msg, int msg_size) const noexcept {
     return guarded(msg, msg_size, [&] {
-      MaterialResponse& r = scratch_response();
+      MaterialResponse& r = scratch<MaterialResponse>();
       if (!model_->evaluate(material_point(in), request, r)) return KELVIN_INADMISSIBLE;
       if (out->P) Eigen::Map<Mat3>(out->P) = r.P;
       if (out->dPdF) Eigen::Map<Mat9>(out->dPdF) = r.dPdF;
@@ -123,7 +117,7 @@ class Exported {
   int evolve(const kelvin_material_point* in, unsigned request, kelvin_internal_response* out,
              char* msg, int msg_size) const noexcept {
     return guarded(msg, msg_size, [&] {
-      InternalResponse& r = scratch_internal();
+      InternalResponse& r = scratch<InternalResponse>();
       model_->evolve(material_point(in), request, r);
       copy(out->rate, r.rate);
       copy(out->dF, r.dF);
