@@ -20,9 +20,12 @@ std::string range_text(const ParamInfo& p) {
 }
 
 void print_model(const Material& m) {
-  fmt::print("{} ({}{}{})\n", m.name(), m.is_viscous() ? "viscous" : "elastic",
+  fmt::print("{} ({}{}{}{})\n", m.name(), m.is_viscous() ? "viscous" : "elastic",
              m.has_energy() ? ", hyperelastic" : "",
-             m.state_size() ? fmt::format(", {} state values per element", m.state_size()) : "");
+             m.state_size() ? fmt::format(", {} state values per element", m.state_size()) : "",
+             m.internal_size()
+                 ? fmt::format(", {} internal variables per element", m.internal_size())
+                 : "");
   for (const auto& p : m.params())
     fmt::print("    {:<10} {:>10g} {:<8} {:<16} {}\n", p.name, p.default_value, p.unit,
                range_text(p), p.description);
@@ -85,8 +88,10 @@ void register_check_material(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "check-material",
       "Check a material's derivatives by central finite differences (dP/dF, dP/dFdot, dP/dq, "
-      "P against the energy), symmetry, objectivity and rest state, at random, compressed, "
-      "stretched and nearly inverted states. Exits non-zero when a check fails.");
+      "P against the energy; for models with internal variables dP/dz and the evolution law's "
+      "df/dF, df/dz, df/dq away from the relaxed state, and f = 0 at it), symmetry, "
+      "objectivity and rest state, at random, compressed, stretched and nearly inverted "
+      "states. Exits non-zero when a check fails.");
   cmd->add_option("model", args->target,
                   "built-in model name, or the path of a plugin library (.so)");
   cmd->add_option("--model", args->model, "model name inside a plugin exporting several");

@@ -323,6 +323,53 @@ TEST(MaterialLibrary, CorotationalMatchesLinearElasticityAndIsRotationInvariant)
   }
 }
 
+TEST(MaterialLibrary, MaxwellBranchStressAndEvolutionMatchFiniteDifferences) {
+  // Away from its relaxed state the branch carries stress: dP/dF, dP/dz, dP/dq and
+  // the evolution law's df/dF, df/dz, df/dq are all checked there.
+  for (const std::vector<double>& q : {std::vector<double>{4e4, 0.05}, {1e3, 3.0}}) {
+    auto m = create_builtin_material("maxwell");
+    const auto checks = check_material_derivatives(*m, q);
+    int evolution = 0;
+    for (const auto& c : checks) {
+      EXPECT_TRUE(c.passed()) << c.what << " at " << c.state << " relative error " << c.error;
+      evolution += c.what == "df/dF" || c.what == "df/dz" || c.what == "df/dq" ||
+                   c.what == "dP/dz" || c.what == "f = 0 when relaxed";
+    }
+    EXPECT_EQ(evolution, 5 * 8);  // five checks at each of the eight test states
+  }
+}
+
+namespace {
+/// The built-in branch with ∂f/∂z off by 0.1 %: a derivative the check must catch.
+class SkewedEvolution final : public Material {
+ public:
+  std::string name() const override { return "skewed"; }
+  const std::vector<ParamInfo>& params() const override { return inner_->params(); }
+  bool is_viscous() const override { return false; }
+  bool has_energy() const override { return true; }
+  int internal_size() const override { return inner_->internal_size(); }
+  void relaxed_internal(const Mat3& F, const double* q, double* z) const override {
+    inner_->relaxed_internal(F, q, z);
+  }
+  void evolve(const MaterialPoint& in, unsigned request, InternalResponse& out) const override {
+    inner_->evolve(in, request, out);
+    if (request & kTangent) out.dz *= 1.001;
+  }
+  bool evaluate(const MaterialPoint& in, unsigned request, MaterialResponse& out) const override {
+    return inner_->evaluate(in, request, out);
+  }
+
+ private:
+  std::unique_ptr<Material> inner_ = create_builtin_material("maxwell");
+};
+}  // namespace
+
+TEST(MaterialLibrary, TheCheckCatchesAWrongEvolutionDerivative) {
+  const auto checks = check_material_derivatives(SkewedEvolution(), {4e4, 0.05});
+  for (const auto& c : checks)
+    EXPECT_EQ(c.passed(), c.what != "df/dz") << c.what << " at " << c.state << " " << c.error;
+}
+
 TEST(MaterialLibrary, ObjectivityOfElasticModels) {
   std::mt19937_64 rng(13);
   for (const char* name : kElastic) {

@@ -10,6 +10,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "fit/fit_loop.hpp"
 #include "gradient_agreement.hpp"
+#include "materials/derivative_check.hpp"
 #include "test_support.hpp"
 
 namespace kelvin {
@@ -195,6 +196,20 @@ TEST(Relaxation, APluginWithInternalVariablesIntegratesAsTheBuiltInOne) {
   EXPECT_EQ(phi[1], phi[0]);
   EXPECT_EQ(g[1], g[0]);
   EXPECT_GT(g[0].norm(), 0);
+}
+
+TEST(Relaxation, APluginsEvolutionLawPassesTheDerivativeCheckThroughTheAbi) {
+  // What `kelvin check-material plugin.so` runs: the evolution law and ∂P/∂z cross
+  // the C ABI intact.
+  auto m = create_material("maxwell", KELVIN_RELAXING_PLUGIN);
+  ASSERT_EQ(m->internal_size(), 6);
+  const auto checks = check_material_derivatives(*m, {4e4, 0.05});
+  int evolution = 0;
+  for (const auto& c : checks) {
+    EXPECT_TRUE(c.passed()) << c.what << " at " << c.state << " relative error " << c.error;
+    evolution += c.what.rfind("df/", 0) == 0;
+  }
+  EXPECT_EQ(evolution, 3 * 8);
 }
 
 }  // namespace kelvin
