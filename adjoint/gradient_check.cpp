@@ -37,6 +37,11 @@ double median_rate(const std::vector<double>& h, const std::vector<double>& r) {
 
 /// See the noise floor in check_gradient.
 constexpr double kNoiseMargin = 100;
+/// Levels above the noise needed for a rate (two rates, their median), and the
+/// largest step the Taylor sequence grows to when they are missing (a unit step
+/// changes each entry by about its own size).
+constexpr int kMinResolvedLevels = 3;
+constexpr double kLargestTaylorStep = 1.0;
 
 }  // namespace
 
@@ -110,17 +115,6 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     d2 << rep.directional_fd;
     rep.adjoint_vs_fd = std::max(relative_error(adj_checked, fd_all), relative_error(d1, d2));
 
-    double h = o.taylor_h0;
-    std::vector<double> signed_remainder;
-    for (int k = 0; k < o.taylor_levels; ++k, h /= 2) {
-      rep.h.push_back(h);
-      signed_remainder.push_back(phi(p + h * rep.direction) - rep.phi -
-                                 h * rep.directional_adjoint);
-      rep.remainder.push_back(std::abs(signed_remainder.back()));
-    }
-    for (size_t k = 0; k + 1 < signed_remainder.size(); ++k)
-      rep.corrected.push_back(std::abs(8 * signed_remainder[k + 1] - signed_remainder[k]));
-
     // Φ's integration error, from Φ at 10× tighter tolerances. Each corrected
     // remainder combines three values of Φ with weights 8, 7 and 1, so its noise
     // can reach 16× that error; levels below kNoiseMargin× it are left out of the rate.
@@ -132,12 +126,40 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     const Evaluation t = problem.evaluate(p, tight);
     if (!t.ok) throw Error(t.error);
     rep.noise = std::abs(t.phi - rep.phi);
-    size_t resolved = 0;
-    while (resolved < rep.corrected.size() && rep.corrected[resolved] > kNoiseMargin * rep.noise)
-      ++resolved;
-    rep.resolved_levels = static_cast<int>(resolved);
+
+    std::vector<double> signed_remainder;
+    auto remainder = [&](double h) {
+      return phi(p + h * rep.direction) - rep.phi - h * rep.directional_adjoint;
+    };
+    auto measure = [&] {
+      rep.remainder.clear();
+      rep.corrected.clear();
+      for (double r : signed_remainder) rep.remainder.push_back(std::abs(r));
+      for (size_t k = 0; k + 1 < signed_remainder.size(); ++k)
+        rep.corrected.push_back(std::abs(8 * signed_remainder[k + 1] - signed_remainder[k]));
+      size_t resolved = 0;
+      while (resolved < rep.corrected.size() && rep.corrected[resolved] > kNoiseMargin * rep.noise)
+        ++resolved;
+      rep.resolved_levels = static_cast<int>(resolved);
+    };
+    double h = o.taylor_h0;
+    for (int k = 0; k < o.taylor_levels; ++k, h /= 2) {
+      rep.h.push_back(h);
+      signed_remainder.push_back(remainder(h));
+    }
+    measure();
+    // A rate needs three resolved levels. Where the Taylor terms sink into the
+    // integration noise already at the first step (a weakly curved Φ, loose
+    // tolerances), the sequence grows upwards by doubling, up to a unit step.
+    while (rep.resolved_levels < kMinResolvedLevels && 2 * rep.h.front() <= kLargestTaylorStep) {
+      rep.h.insert(rep.h.begin(), 2 * rep.h.front());
+      signed_remainder.insert(signed_remainder.begin(), remainder(rep.h.front()));
+      ++rep.added_levels;
+      measure();
+    }
     rep.slope = median_rate(
-        rep.h, std::vector<double>(rep.corrected.begin(), rep.corrected.begin() + resolved));
+        rep.h,
+        std::vector<double>(rep.corrected.begin(), rep.corrected.begin() + rep.resolved_levels));
     rep.ok = true;
   } catch (const Error& e) {
     rep.error = e.what();

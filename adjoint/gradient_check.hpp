@@ -6,7 +6,7 @@
 /// for h halved from level to level. The rate of |8 r(h/2) − r(h)| = |c₂|h² + O(h⁴)
 /// (the h³ term cancels) must be ≈ 2 when the gradient is right; a gradient error e
 /// adds 3eh to it, and the rate falls to ≈ 1. Only levels above Φ's integration
-/// noise count.
+/// noise count; when fewer than three do, the sequence grows to larger steps.
 #include <Eigen/Core>
 #include <vector>
 
@@ -38,7 +38,10 @@ struct GradientCheckReport {
   /// integration noise, not Taylor terms.
   double noise = 0;
   int resolved_levels = 0;  // leading entries of `corrected` above that noise
-  double slope = 0;         // median rate of those entries between consecutive h (NaN: < 2)
+  /// Steps added above taylor_h0 (doubling, up to 1) because fewer than three
+  /// levels cleared the noise.
+  int added_levels = 0;
+  double slope = 0;  // median rate of those entries between consecutive h (NaN: < 2)
   double adjoint_vs_forward = 0, adjoint_vs_fd = 0;  // relative errors (∞-norms)
   double seconds_forward_only = 0, seconds_adjoint = 0, seconds_forward_sensitivities = 0;
 };

@@ -51,9 +51,8 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
       ->check(positive_number());
   cmd->add_option("--taylor-step", args->taylor_h0,
                   "first step h of the Taylor test along the random direction (halved six "
-                  "times); a direction along which Φ is nearly linear (many per-element "
-                  "parameters at random signs) needs a longer one for its remainder to rise "
-                  "above the integration noise")
+                  "times); when fewer than three levels rise above Φ's integration noise, "
+                  "larger steps (doubling, up to 1) are added")
       ->capture_default_str()
       ->check(positive_number());
   cmd->add_flag("--no-forward", args->no_forward,
@@ -131,6 +130,11 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
         "median rate {:.3f} over the {} levels above 100× Φ's integration noise {:.3e} (2 for "
         "an exact gradient)\n",
         r.slope, r.resolved_levels, r.noise);
+    if (r.added_levels)
+      fmt::print(
+          "(the sequence began at 2^{:.0f} and grew by {} larger step{}: fewer than three levels "
+          "cleared the noise)\n",
+          std::log2(args->taylor_h0), r.added_levels, r.added_levels > 1 ? "s" : "");
     fmt::print(
         "wall time: Φ alone {:.3g} s, Φ + adjoint gradient {:.3g} s ({:.2f}×){}\n",
         r.seconds_forward_only, r.seconds_adjoint, r.seconds_adjoint / r.seconds_forward_only,

@@ -97,6 +97,27 @@ TEST(Gradients, GlobalNeoHookeanPowerLawAndDensity) {
   EXPECT_GT(r.rms, 1e-4);  // the start is far from the truth: the gradient is not noise
 }
 
+TEST(Gradients, ATaylorTestStartedInTheNoiseGrowsToResolvedSteps) {
+  // At 100× the scenario's tolerances a first step of 2^-16 puts every level's
+  // remainder (≈ c₂h²) under the integration noise (3e-14 here): the sequence must
+  // grow upwards until three levels clear it (ten doublings, to 2^-6), and the rate
+  // there is still 2.
+  const fs::path dir = scratch("taylor-growth");
+  const Scenario s = fit_scenario(dir, kStartNeoHookean, simulate_truth(dir, kTruthNeoHookean));
+  FitProblem problem(s, {param("elastic.mu"), param("viscous.nu")});
+  GradientCheckOptions o;
+  o.forward = false;
+  o.adjoint.tolerance_scale = 100;
+  o.taylor_h0 = std::ldexp(1.0, -16);
+  o.taylor_levels = 3;
+  const GradientCheckReport r = check_gradient(problem, problem.map().initial(), o);
+  ASSERT_TRUE(r.ok) << r.error;
+  EXPECT_GT(r.added_levels, 0);
+  EXPECT_GE(r.resolved_levels, 3);
+  EXPECT_LE(r.h.front(), 1.0);
+  EXPECT_NEAR(r.slope, 2.0, 0.2) << "first step " << r.h.front() << ", noise " << r.noise;
+}
+
 TEST(Gradients, RayleighPerRegionWithDensity) {
   const fs::path dir = scratch("rayleigh");
   const Scenario s = fit_scenario(dir, kStartRayleigh, simulate_truth(dir, kTruthRayleigh));
