@@ -66,6 +66,11 @@ GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p
     const Evaluation a = problem.evaluate(p, adj);
     if (!a.ok) throw Error(a.error);
     rep.seconds_adjoint = a.seconds;
+    for (const auto& e : base.experiments) rep.phi_stats += e.forward_stats;
+    for (const auto& e : a.experiments) {
+      rep.adjoint_forward_stats += e.forward_stats;
+      rep.adjoint_backward_stats += e.backward_stats;
+    }
     rep.adjoint = a.gradient;
     if (o.forward) {
       const Evaluation f = problem.evaluate(p, fwd);

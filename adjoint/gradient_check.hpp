@@ -44,6 +44,9 @@ struct GradientCheckReport {
   double slope = 0;  // median rate of those entries between consecutive h (NaN: < 2)
   double adjoint_vs_forward = 0, adjoint_vs_fd = 0;  // relative errors (∞-norms)
   double seconds_forward_only = 0, seconds_adjoint = 0, seconds_forward_sensitivities = 0;
+  /// Integrator counters of Φ alone, and of the adjoint evaluation's forward and
+  /// backward passes (summed over experiments): where the gradient's time goes.
+  IntegratorStats phi_stats, adjoint_forward_stats, adjoint_backward_stats;
 };
 
 GradientCheckReport check_gradient(FitProblem& problem, const Eigen::VectorXd& p,

@@ -142,6 +142,10 @@ void register_gradcheck(CLI::App& app, int& exit_code) {
                                        r.seconds_forward_sensitivities,
                                        r.seconds_forward_sensitivities / r.seconds_forward_only)
                          : "");
+    fmt::print(
+        "steps: Φ alone {}; with the adjoint {} forward and {} backward ({} Newton matrices)\n",
+        r.phi_stats.steps, r.adjoint_forward_stats.steps, r.adjoint_backward_stats.steps,
+        r.adjoint_backward_stats.jacobian_evals);
     std::vector<std::string> failures;
     if (r.forward.size() && !(r.adjoint_vs_forward <= args->tolerance))
       failures.push_back(fmt::format("adjoint and forward differ by {:.2e} > {:.1e}",

@@ -100,6 +100,10 @@ struct Context {
   bool gauss_newton_start_pending = false;
   std::vector<double> stage_best;  // the best objective after each accepted move of the stage
   bool plateau = false;            // see kPlateauWindow
+  /// At the last stage in Gauss–Newton-scaled parameters: the relative gain the
+  /// Gauss–Newton model predicts from the best point, once it fell within Φ's
+  /// accuracy (the fit has converged; NaN before).
+  double gain_within_accuracy = NAN;
 };
 
 /// The scale the optimiser sees the objective at (see trial_evaluation.cpp).
@@ -116,5 +120,9 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
 /// Continues in Gauss–Newton-scaled parameters about `best` (sets c.basis); false
 /// when JᵀJ is not available there.
 bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd& gradient);
+/// The decrease of Φ, relative to the best's, that a Gauss–Newton step from the best
+/// point with this gradient predicts (with the JᵀJ of the last preconditioning);
+/// NaN without one, or with terms in p alone in the objective (a regulariser).
+double predicted_gain(const Context& c, const Eigen::VectorXd& gradient);
 
 }  // namespace kelvin::fit_detail

@@ -214,6 +214,13 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
         continue;
       }
     }
+    if (std::isfinite(c.gain_within_accuracy) && !c.outcome.interrupted) {
+      c.outcome.stop_reason = fmt::format(
+          "converged: a Gauss–Newton step from the best point predicts a gain of {:.2g} % of Φ, "
+          "within its accuracy at these tolerances ({:.2g} %)",
+          100 * c.gain_within_accuracy, 100 * c.accuracy);
+      break;
+    }
     // L-BFGS may report the stall's force_stop as a plain failure too.
     const bool stalled = c.stalled;
     if (c.stalled && !c.outcome.interrupted && !c.budget_spent) {

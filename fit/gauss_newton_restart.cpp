@@ -41,4 +41,19 @@ bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd
   return true;
 }
 
+double predicted_gain(const Context& c, const Eigen::VectorXd& gradient) {
+  const UncertaintyAtPoint& cache = c.outcome.uncertainty;
+  const ParameterUncertainty& u = cache.value;
+  const double phi = c.outcome.best.misfit;
+  const int n = static_cast<int>(gradient.size());
+  if (cache.p.size() != n || u.root_inverse.rows() != n || !(phi > 0) || !(u.sigma > 0) ||
+      u.observations <= n || !c.terms.empty())
+    return NAN;
+  // The decrease to the minimum of the Gauss–Newton model, ½ gᵀ Δp_GN = ½ β |Lᵀg|²
+  // (see precondition), over Φ.
+  const double beta = (u.observations - n) / (2 * phi);
+  const double gain = 0.5 * beta * (u.sigma * u.root_inverse.transpose() * gradient).squaredNorm();
+  return std::isfinite(gain) ? gain / phi : NAN;
+}
+
 }  // namespace kelvin::fit_detail
