@@ -4,6 +4,24 @@
 #include "fit/fit_context.hpp"
 
 namespace kelvin::fit_detail {
+namespace {
+
+/// The Gauss–Newton model of Φ about a point, from the JᵀJ of `u`: a root L of the
+/// covariance C = σ̂² (JᵀJ)⁻¹ (any L with L Lᵀ = C serves; a direction the data barely
+/// resolve, V09's λ at 660 Pa beside μ at 1.3e5 Pa, is scaled at the sensitivities'
+/// accuracy rather than refused) and β = (N − n) / (2Φ), such that the Gauss–Newton
+/// step is Δp_GN = −(1/κ)(JᵀJ)⁻¹ g = −β C g (κ = 2Φ / ‖r‖² relates Φ's time integral
+/// to the sum over frames). False when JᵀJ is unavailable or singular.
+bool gauss_newton_model(const ParameterUncertainty& u, double phi, int n, Eigen::MatrixXd& L,
+                        double& beta) {
+  if (u.root_inverse.rows() != n || !(phi > 0) || !(u.sigma > 0) || u.observations <= n)
+    return false;
+  L = u.sigma * u.root_inverse;
+  beta = (u.observations - n) / (2 * phi);
+  return L.allFinite();
+}
+
+}  // namespace
 
 /// Gauss–Newton preconditioning for a restart of a stalled L-BFGS: in an
 /// ill-conditioned valley (the occluded-bar fit: λ 1.9× off, its gradient 5× below
@@ -22,19 +40,13 @@ bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd
     cache.value = gauss_newton_uncertainty(c.problem, best, c.options.gradient.interrupt);
     cache.p = best;
   }
-  const ParameterUncertainty& u = cache.value;
-  const double phi = c.outcome.best.misfit;
-  const int n = static_cast<int>(best.size());
-  // Any L with L Lᵀ = C = σ̂² (JᵀJ)⁻¹ serves (L-BFGS in z does not see a rotation); a
-  // direction the data barely resolve (V09's λ at 660 Pa beside μ at 1.3e5 Pa) is
-  // scaled at the sensitivities' accuracy rather than refused.
-  if (u.root_inverse.rows() != n || !(phi > 0) || !(u.sigma > 0) || u.observations <= n)
+  Eigen::MatrixXd L;
+  double beta = 0;
+  if (!gauss_newton_model(cache.value, c.outcome.best.misfit, static_cast<int>(best.size()), L,
+                          beta))
     return false;
-  const Eigen::MatrixXd L = u.sigma * u.root_inverse;
-  if (!L.allFinite()) return false;
-  // Δp_GN = −(1/κ)(JᵀJ)⁻¹ g = −β C g with β = (N − n) / (2Φ); with B = s L the
-  // step −½ B Lᵀg/|Lᵀg| equals it for s = 2β|Lᵀg|.
-  const double beta = (u.observations - n) / (2 * phi);
+  // B = s L makes L-BFGS's first step −½ B Lᵀg/|Lᵀg| the Gauss–Newton step for
+  // s = 2β|Lᵀg|.
   const double s = 2 * beta * (L.transpose() * gradient).norm();
   if (!(s > 0) || !std::isfinite(s)) return false;
   c.basis = s * L;
@@ -43,16 +55,14 @@ bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd
 
 double predicted_gain(const Context& c, const Eigen::VectorXd& gradient) {
   const UncertaintyAtPoint& cache = c.outcome.uncertainty;
-  const ParameterUncertainty& u = cache.value;
   const double phi = c.outcome.best.misfit;
-  const int n = static_cast<int>(gradient.size());
-  if (cache.p.size() != n || u.root_inverse.rows() != n || !(phi > 0) || !(u.sigma > 0) ||
-      u.observations <= n || !c.terms.empty())
+  Eigen::MatrixXd L;
+  double beta = 0;
+  if (cache.p.size() != gradient.size() || !c.terms.empty() ||
+      !gauss_newton_model(cache.value, phi, static_cast<int>(gradient.size()), L, beta))
     return NAN;
-  // The decrease to the minimum of the Gauss–Newton model, ½ gᵀ Δp_GN = ½ β |Lᵀg|²
-  // (see precondition), over Φ.
-  const double beta = (u.observations - n) / (2 * phi);
-  const double gain = 0.5 * beta * (u.sigma * u.root_inverse.transpose() * gradient).squaredNorm();
+  // The decrease to the Gauss–Newton model's minimum, ½ gᵀ(−Δp_GN) = ½ β |Lᵀg|², over Φ.
+  const double gain = 0.5 * beta * (L.transpose() * gradient).squaredNorm();
   return std::isfinite(gain) ? gain / phi : NAN;
 }
 
