@@ -9,6 +9,7 @@
 #include <atomic>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "adjoint/evaluation_plan.hpp"
 #include "adjoint/marker_objective.hpp"
@@ -43,6 +44,10 @@ struct GradientOptions {
   /// never fails, however its steps are spread in time.
   double step_pace_floor = 1;
   const std::atomic<bool>* interrupt = nullptr;
+  /// Forward sensitivities of these model entries only (null: every model entry);
+  /// the others' columns stay zero. A diagnosis screens each candidate in a model of
+  /// its own and needs only that candidate's columns there.
+  const std::vector<int>* sensitivity_entries = nullptr;
 };
 
 /// Default checkpoint budget (steps) for a state of `state_size` entries: 512 MiB of

@@ -82,6 +82,11 @@ struct ExperimentRun {
   /// forward-sensitivity gradients and marker sensitivities share this one setup.
   /// `error_control`: see IdasIntegrator::add_sensitivities.
   Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ, bool error_control);
+  /// The entries add_sensitivities carries, in its columns' order: the model's
+  /// (observation entries do not move the model), or GradientOptions::sensitivity_entries.
+  std::vector<int> sensitivity_entries() const {
+    return opt.sensitivity_entries ? *opt.sensitivity_entries : map.model_entries();
+  }
   /// Integrates segments 0 … count−1 of T from (x₀, v₀), each restarted with the
   /// first step its predecessor proposed, and adds their Φ (the targets at t₀ and at
   /// the segments' ends included) and steps to `result`;

@@ -39,8 +39,7 @@ void pattern_multiply(const SparsePattern& P, const std::vector<double>& A, cons
 }  // namespace
 
 Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool error_control) {
-  // Observation entries do not move the model: only the model's entries are carried.
-  const std::vector<int> entries = map.model_entries();
+  const std::vector<int> entries = sensitivity_entries();
   const int ns = static_cast<int>(entries.size());
   const SparsePattern& P = model.pattern();
   const int size = state_size(), m = size - 2 * n;
@@ -80,11 +79,14 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
   }
 
   // Sensitivity error weights scale with the parameter: dy/d(ln q) has the units
-  // of y; dy/dq is measured per typical q.
+  // of y; dy/dq is measured per typical q, at least the block's scale. A candidate
+  // effect at 0 measured per |q| got weights of 10³⁰⁰: its sensitivities' Newton
+  // iteration passed its test after one pass, 5–50× off when no nominal parameter's
+  // sensitivity, solved alongside, kept the iteration going.
   Eigen::VectorXd pbar(ns);
   for (int j = 0; j < ns; ++j) {
     const ParameterBlock& b = map.block_of_entry(entries[j]);
-    pbar[j] = b.log || b.is_multiplier() ? 1.0 : std::max(std::abs(p[entries[j]]), 1e-300);
+    pbar[j] = b.log || b.is_multiplier() ? 1.0 : std::max(std::abs(p[entries[j]]), b.scale);
   }
 
   auto cache = std::make_shared<StateCache>();
@@ -122,7 +124,7 @@ void evaluate_forward_sensitivities(ExperimentRun& run, ExperimentResult& result
   const int n = run.n;
   auto integ = run.start(run.t0, run.x0, run.v0, run.z0);
   // A gradient for the line search: its accuracy is worth the extra steps.
-  const std::vector<int> entries = run.map.model_entries();
+  const std::vector<int> entries = run.sensitivity_entries();
   const Eigen::MatrixXd yS0 = run.add_sensitivities(*integ, true);
   if (!entries.empty() && run.objective.num_markers() + run.observation_count > 0)
     integ->add_quadrature_sensitivities([&run, n](double t, const double* y, const double*, int ns,

@@ -41,7 +41,8 @@ Eigen::MatrixXd residual_sensitivities(const FemModel& model, const MarkerObject
 
 MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::VectorXd& p,
                                   const std::vector<double>& times, bool with_sensitivities,
-                                  const std::atomic<bool>* interrupt) {
+                                  const std::atomic<bool>* interrupt,
+                                  const std::vector<int>* sensitivity_entries) {
   MarkerTrajectory out;
   Experiment& experiment = problem.experiment(index);
   const ParameterMap& map = problem.map();
@@ -51,6 +52,7 @@ MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::V
   GradientOptions options;
   options.method = with_sensitivities ? GradientMethod::kForward : GradientMethod::kNone;
   options.interrupt = interrupt;
+  options.sensitivity_entries = sensitivity_entries;
   experiment.apply(map, p);
   const MarkerObjective& objective = experiment.objective();
   try {
@@ -74,7 +76,7 @@ MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::V
     // point, without it 9.9k steps (the plain run's 9.9k) and 6.2 s.
     if (with_sensitivities) yS0 = run.add_sensitivities(*integ, false);
     const int n = run.n, np = map.size();
-    const std::vector<int> entries = map.model_entries();
+    const std::vector<int> entries = run.sensitivity_entries();
     Eigen::MatrixXd sx = Eigen::MatrixXd::Zero(n, np);
     Eigen::Matrix3Xd x, v;
     ExperimentResult progress;

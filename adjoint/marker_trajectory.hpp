@@ -30,9 +30,12 @@ struct MarkerTrajectory {
 
 /// Simulates experiment `index` of `problem` at parameters p of its map (applied
 /// first), integrated as the problem's evaluations are (FitProblem::plan), and
-/// samples the embedded markers at `times` (ascending, within the run).
+/// samples the embedded markers at `times` (ascending, within the run). With
+/// `sensitivity_entries`, only those model entries' columns are integrated (the other
+/// model entries' are zero; observation entries' are always there).
 MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::VectorXd& p,
                                   const std::vector<double>& times, bool with_sensitivities,
-                                  const std::atomic<bool>* interrupt = nullptr);
+                                  const std::atomic<bool>* interrupt = nullptr,
+                                  const std::vector<int>* sensitivity_entries = nullptr);
 
 }  // namespace kelvin

@@ -37,7 +37,8 @@ std::string combination(const ParameterMap& map, Eigen::VectorXd dp) {
 }  // namespace
 
 GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
-                                      const std::atomic<bool>* interrupt, bool with_jacobian) {
+                                      const std::atomic<bool>* interrupt, bool with_jacobian,
+                                      const std::vector<int>* sensitivity_entries) {
   GaussNewtonSystem g;
   const ParameterMap& map = problem.map();
   std::vector<double> residual;
@@ -64,7 +65,8 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
     for (double t : obs.times)
       if (t >= begin && t <= end) times.push_back(t);
     if (times.empty()) continue;
-    const MarkerTrajectory traj = simulate_markers(problem, e, p, times, with_jacobian, interrupt);
+    const MarkerTrajectory traj =
+        simulate_markers(problem, e, p, times, with_jacobian, interrupt, sensitivity_entries);
     if (!traj.ok) {
       g.error = fmt::format("{}: {}", s.path, traj.error);
       return g;

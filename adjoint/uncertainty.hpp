@@ -58,10 +58,13 @@ struct GaussNewtonSystem {
   std::vector<ResidualSample> samples;  // N, in residual order
   double rtol = 0;                      // loosest solver rtol: the accuracy of J
 };
-/// Without `with_jacobian` only r (one plain run per experiment).
+/// Without `with_jacobian` only r (one plain run per experiment); with
+/// `sensitivity_entries`, J's columns of the other model entries are zero (see
+/// simulate_markers).
 GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
                                       const std::atomic<bool>* interrupt = nullptr,
-                                      bool with_jacobian = true);
+                                      bool with_jacobian = true,
+                                      const std::vector<int>* sensitivity_entries = nullptr);
 
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);
