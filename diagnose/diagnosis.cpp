@@ -16,6 +16,7 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
 #include "base/error.hpp"
+#include "diagnose/diagnosis_model.hpp"
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/heldout_prediction.hpp"
 #include "diagnose/learned_correction.hpp"
@@ -31,38 +32,6 @@ using Clock = std::chrono::steady_clock;
 
 double since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-/// One loaded scenario file and its fit problem (the scenario must outlive it).
-struct Model {
-  std::unique_ptr<Scenario> scenario;
-  std::unique_ptr<FitProblem> problem;
-  ExtendedScenario extended;
-};
-
-Model load_model(const std::string& source, const Scenario& nominal,
-                 const std::vector<const Candidate*>& with, bool screening, const std::string& path,
-                 int refit_form = -1) {
-  Model m;
-  m.extended = write_extended_scenario(source, nominal, with, screening, path, refit_form);
-  m.scenario = std::make_unique<Scenario>(load_scenario(path));
-  m.problem = std::make_unique<FitProblem>(*m.scenario, m.scenario->fit.parameters);
-  // The stages read residuals per marker, frame and frequency band of captured motion.
-  if (m.problem->num_static_terms() > 0)
-    throw Error(fmt::format(
-        "{}: fit.experiments: static measurements ('{}') are not diagnosed yet; diagnose the "
-        "captured motions and fit the static ones jointly with kelvin fit",
-        nominal.path, m.problem->static_term(0).name()));
-  return m;
-}
-
-std::vector<int> entries_of(const Model& m, const std::vector<int>& specs) {
-  std::vector<int> out;
-  for (int k : specs) {
-    const auto e = m.problem->map().entries_of_spec(k);
-    out.insert(out.end(), e.begin(), e.end());
-  }
-  return out;
 }
 
 MisfitFigures misfit(FitProblem& problem, const Eigen::VectorXd& p,
@@ -296,7 +265,9 @@ void predict_heldout_drops(Diagnosis& d, const std::vector<int>& order,
     bool same = hmap.size() == smap.size();
     for (int j = 0; same && j < smap.size(); ++j) same = hmap.label(j) == smap.label(j);
     if (!same) return fail(path + ": its candidates' parameters differ from the training's");
-    const GaussNewtonSystem g = gauss_newton_system(*h.problem, p_screen, o.interrupt);
+    const GaussNewtonSystem g =
+        screening_system(h, path, nominal, all, -1, p_screen, models,
+                         fmt::format("heldout{}-screening", k), o.interrupt);
     if (!g.ok) return fail(path + ": " + g.error);
     const std::vector<int> fitted = range(n_nominal);
     for (int c : passed) {
@@ -491,7 +462,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                       j, smap.label(j), base_map.label(j)));
   Eigen::VectorXd p_screen = smap.initial();
   p_screen.head(n_nominal) = p_nominal;
-  const GaussNewtonSystem g = gauss_newton_system(*screen.problem, p_screen, o.interrupt);
+  const GaussNewtonSystem g = screening_system(screen, d.scenario, nominal, all, -1, p_screen,
+                                               models, "screening", o.interrupt);
   if (!g.ok) throw Error(fmt::format("the screening run failed: {}", g.error));
   d.noise = estimate_noise(g.residual, g.samples);
   d.nominal_train.ok = true;
@@ -1031,7 +1003,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       if (!same) throw Error("internal: the second screening's parameters differ from the refit's");
       Eigen::VectorXd p2 = amap.initial();
       p2.head(n_fixed) = a.p;
-      const GaussNewtonSystem g2 = gauss_newton_system(*again.problem, p2, o.interrupt);
+      const GaussNewtonSystem g2 = screening_system(again, d.scenario, nominal, with, 0, p2, models,
+                                                    "screening-with-effect", o.interrupt);
       if (g2.ok) {
         std::vector<std::pair<std::string, std::vector<int>>> groups2;
         ScreeningOptions so2;

@@ -13,6 +13,7 @@
 #include "diagnose/candidates.hpp"
 #include "diagnose/diagnose_settings.hpp"
 #include "diagnose/diagnosis.hpp"
+#include "diagnose/diagnosis_model.hpp"
 #include "diagnose/diagnosis_outputs.hpp"
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/learned_correction.hpp"
@@ -244,6 +245,45 @@ TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
   // Equal to the integration error (rtol 1e-7): the extra terms change the Newton
   // iterations' round-off, not the model.
   EXPECT_NEAR(e.phi, base.phi, 1e-6 * base.phi);
+}
+
+// The screening's Jacobian computed one candidate at a time (each in the nominal model
+// extended by it alone, integrating its own sensitivities) is the joint model's: a
+// nested candidate at its nominal value leaves the tracks where they were. Alone, a
+// candidate at 0 also needs sensitivity weights of its own scale (with weights per |q|
+// its columns came out 5–50× off: no nominal sensitivity kept the Newton iteration
+// going). Agreement is to ~10⁻⁶ at rtol 10⁻⁷.
+TEST(ScreeningSystem, PerCandidateColumnsAreTheJointModels) {
+  const fs::path dir = test::scratch("diagnosis-screening-system");
+  const std::string stiffer = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 30 })";
+  const Scenario nominal = nominal_scenario(dir, stiffer);
+  const std::vector<Candidate> all = builtin_candidates(nominal);
+  // The compliant clamp's nominal pads are not exactly rigid (see above): its model
+  // moves the tracks by 10⁻⁴, so the joint model is not the reference for it.
+  std::vector<const Candidate*> with;
+  for (const auto& c : all)
+    if (c.screened && c.id != "clamp_compliance") with.push_back(&c);
+  Model joint = load_model(nominal.path, nominal, with, true, (dir / "joint.yaml").string());
+  Eigen::VectorXd p = joint.problem->map().initial();
+  // μ and ν from 0.8e5 and 30 to 0.9e5 and 25, away from the fit: no column vanishes.
+  ASSERT_TRUE(joint.problem->map().block_of_entry(0).log);
+  p.head(2) += Eigen::Vector2d(std::log(0.9 / 0.8), std::log(25.0 / 30));
+  const GaussNewtonSystem a = gauss_newton_system(*joint.problem, p);
+  ASSERT_TRUE(a.ok) << a.error;
+  const GaussNewtonSystem b =
+      screening_system(joint, nominal.path, nominal, with, -1, p, dir, "parts", nullptr);
+  ASSERT_TRUE(b.ok) << b.error;
+  ASSERT_EQ(a.residual.size(), b.residual.size());
+  EXPECT_LT((a.residual - b.residual).norm(), 1e-5 * a.residual.norm());
+  ASSERT_EQ(a.jacobian.cols(), b.jacobian.cols());
+  const ParameterMap& map = joint.problem->map();
+  for (int j = 0; j < map.size(); ++j) {
+    const double scale = a.jacobian.col(j).norm();
+    EXPECT_GT(scale, 0) << map.label(j);
+    EXPECT_LT((a.jacobian.col(j) - b.jacobian.col(j)).norm(), 1e-4 * scale) << map.label(j);
+  }
 }
 
 // The learned correction is nested at zero, and its signature reads the refitted

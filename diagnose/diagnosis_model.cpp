@@ -1,0 +1,136 @@
+#include "diagnose/diagnosis_model.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <set>
+#include <utility>
+
+#include "base/error.hpp"
+
+namespace kelvin {
+
+Model load_model(const std::string& source, const Scenario& nominal,
+                 const std::vector<const Candidate*>& with, bool screening, const std::string& path,
+                 int refit_form) {
+  Model m;
+  m.extended = write_extended_scenario(source, nominal, with, screening, path, refit_form);
+  m.scenario = std::make_unique<Scenario>(load_scenario(path));
+  m.problem = std::make_unique<FitProblem>(*m.scenario, m.scenario->fit.parameters);
+  // The stages read residuals per marker, frame and frequency band of captured motion.
+  if (m.problem->num_static_terms() > 0)
+    throw Error(fmt::format(
+        "{}: fit.experiments: static measurements ('{}') are not diagnosed yet; diagnose the "
+        "captured motions and fit the static ones jointly with kelvin fit",
+        nominal.path, m.problem->static_term(0).name()));
+  return m;
+}
+
+std::vector<int> entries_of(const Model& m, const std::vector<int>& specs) {
+  std::vector<int> out;
+  for (int k : specs) {
+    const auto e = m.problem->map().entries_of_spec(k);
+    out.insert(out.end(), e.begin(), e.end());
+  }
+  return out;
+}
+
+namespace {
+
+/// A model of some of `with`'s candidates and where its entries sit in the joint one.
+struct Part {
+  Model model;
+  std::vector<std::pair<int, int>> entries;  // (entry here, entry in the joint model)
+};
+
+Part load_part(const Model& joint, const std::string& source, const Scenario& nominal,
+               const std::vector<const Candidate*>& with, const std::vector<int>& picked,
+               int refit_form, const std::string& path) {
+  std::vector<const Candidate*> list;
+  int form = -1;
+  for (int c : picked) {
+    if (c == refit_form) form = static_cast<int>(list.size());
+    list.push_back(with[c]);
+  }
+  Part part{load_model(source, nominal, list, true, path, form), {}};
+  const ExtendedScenario& here = part.model.extended;
+  const ExtendedScenario& there = joint.extended;
+  const auto pair_up = [&](const std::vector<int>& a, const std::vector<int>& b) {
+    if (a.size() != b.size())
+      throw Error(fmt::format("internal: {} has {} entries where the joint screening model has {}",
+                              path, a.size(), b.size()));
+    for (std::size_t k = 0; k < a.size(); ++k) part.entries.emplace_back(a[k], b[k]);
+  };
+  std::vector<int> nominal_specs(static_cast<std::size_t>(there.nominal_specs));
+  for (int k = 0; k < there.nominal_specs; ++k) nominal_specs[k] = k;
+  pair_up(entries_of(part.model, nominal_specs), entries_of(joint, nominal_specs));
+  for (std::size_t i = 0; i < picked.size(); ++i)
+    pair_up(entries_of(part.model, here.candidate_specs[i]),
+            entries_of(joint, there.candidate_specs[picked[i]]));
+  return part;
+}
+
+}  // namespace
+
+GaussNewtonSystem screening_system(const Model& m, const std::string& source,
+                                   const Scenario& nominal,
+                                   const std::vector<const Candidate*>& with, int refit_form,
+                                   const Eigen::VectorXd& p, const std::filesystem::path& dir,
+                                   const std::string& stem, const std::atomic<bool>* interrupt) {
+  const std::vector<int> model_entries = m.problem->map().model_entries();
+  const std::set<int> moves(model_entries.begin(), model_entries.end());
+  std::vector<int> base, own;  // candidates in the base run; those run one by one
+  for (int c = 0; c < static_cast<int>(with.size()); ++c) {
+    const std::vector<int> e = entries_of(m, m.extended.candidate_specs[c]);
+    const bool moves_model =
+        std::any_of(e.begin(), e.end(), [&](int j) { return moves.count(j) > 0; });
+    (c == refit_form || !moves_model ? base : own).push_back(c);
+  }
+
+  GaussNewtonSystem g;
+  const auto run = [&](Part& part, const std::vector<int>* sensitivity_entries) {
+    Eigen::VectorXd q = part.model.problem->map().initial();
+    for (const auto& [here, there] : part.entries) q[here] = p[there];
+    return gauss_newton_system(*part.model.problem, q, interrupt, true, sensitivity_entries);
+  };
+  Part b =
+      load_part(m, source, nominal, with, base, refit_form, (dir / (stem + "-base.yaml")).string());
+  const GaussNewtonSystem gb = run(b, nullptr);
+  if (!gb.ok) return gb;
+  g.residual = gb.residual;
+  g.samples = gb.samples;
+  g.rtol = gb.rtol;
+  g.jacobian = Eigen::MatrixXd::Zero(gb.residual.size(), m.problem->map().size());
+  for (const auto& [here, there] : b.entries) g.jacobian.col(there) = gb.jacobian.col(here);
+
+  for (int c : own) {
+    std::vector<int> picked = {c};
+    if (refit_form >= 0) picked.insert(picked.begin(), refit_form);
+    Part part = load_part(m, source, nominal, with, picked, refit_form,
+                          (dir / fmt::format("{}-{}{}.yaml", stem, with[c]->id,
+                                             with[c]->where.empty() ? "" : "-" + with[c]->where))
+                              .string());
+    // Its own entries only: the base's columns are known already.
+    const std::vector<int> mine =
+        entries_of(part.model, part.model.extended.candidate_specs[picked.size() - 1]);
+    std::vector<int> integrated;
+    for (int j : part.model.problem->map().model_entries())
+      if (std::find(mine.begin(), mine.end(), j) != mine.end()) integrated.push_back(j);
+    const GaussNewtonSystem gc = run(part, &integrated);
+    if (!gc.ok) {
+      g.error = fmt::format("{} (screening {})", gc.error, with[c]->id);
+      return g;
+    }
+    if (gc.residual.size() != g.residual.size())
+      throw Error(fmt::format("internal: screening {} sampled {} residuals, the base model {}",
+                              with[c]->id, gc.residual.size(), g.residual.size()));
+    g.rtol = std::max(g.rtol, gc.rtol);
+    for (const auto& [here, there] : part.entries)
+      if (std::find(mine.begin(), mine.end(), here) != mine.end())
+        g.jacobian.col(there) = gc.jacobian.col(here);
+  }
+  g.ok = true;
+  return g;
+}
+
+}  // namespace kelvin

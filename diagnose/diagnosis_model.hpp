@@ -1,0 +1,52 @@
+#pragma once
+/// \file
+/// The models a diagnosis runs: a scenario file extended by candidates, loaded with
+/// its fit problem, and the screening's Gauss–Newton system of such a model
+/// computed one candidate at a time.
+#include <Eigen/Core>
+#include <atomic>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "adjoint/fit_problem.hpp"
+#include "adjoint/uncertainty.hpp"
+#include "diagnose/extended_scenario.hpp"
+
+namespace kelvin {
+
+/// One loaded scenario file and its fit problem (the scenario must outlive it).
+struct Model {
+  std::unique_ptr<Scenario> scenario;
+  std::unique_ptr<FitProblem> problem;
+  ExtendedScenario extended;
+};
+
+/// Writes `path` from `source` extended by `with` (see write_extended_scenario) and
+/// loads it. Static measurements are refused: the stages read captured motion.
+Model load_model(const std::string& source, const Scenario& nominal,
+                 const std::vector<const Candidate*>& with, bool screening, const std::string& path,
+                 int refit_form = -1);
+
+/// The entries of m's map that fit.parameters specs `specs` make, in order.
+std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
+
+/// The Gauss–Newton system (r, J) at p of `m`, the screening model that load_model
+/// made from `source` and `with` (screened form, with[refit_form] an accepted effect
+/// at its refit), computed without integrating every candidate's terms and
+/// sensitivities together: a nested candidate at its nominal value leaves the tracks
+/// where the model without it puts them, so its columns of J are those of the base
+/// model (the nominal one and with[refit_form]) extended by it alone. One run of the
+/// base model, with the candidates that only re-read the capture (marker offsets, the
+/// clock, the registration), gives r and the base's columns; each other candidate's
+/// run integrates its own sensitivities only. On V01 the joint run cost more than
+/// the sum of the candidates' separate ones, each term slowing every step of every
+/// sensitivity. The per-candidate models are written to `dir`/`stem`-<id>.yaml.
+GaussNewtonSystem screening_system(const Model& m, const std::string& source,
+                                   const Scenario& nominal,
+                                   const std::vector<const Candidate*>& with, int refit_form,
+                                   const Eigen::VectorXd& p, const std::filesystem::path& dir,
+                                   const std::string& stem, const std::atomic<bool>* interrupt);
+
+}  // namespace kelvin
