@@ -74,9 +74,13 @@ void DaeSystem::add_internal_product(const double* s, double* r) const {
   for (size_t k = 0; k < blocks.size(); ++k) {
     const InternalBlock& b = blocks[k];
     const Eigen::Map<const Eigen::VectorXd> sz(s + 2 * n_ + b.offset, b.size);
-    model_.add_element_values(b.element, internal_.Kxz[k] * sz, r + n_);
-    Eigen::Map<Eigen::VectorXd>(r + 2 * n_ + b.offset, b.size) -=
-        internal_.fx[k] * model_.element_values(b.element, s) + internal_.fz[k] * sz;
+    // A branch without stress (a screened one at g = 0) owes the forces nothing.
+    if (internal_.coupled[k]) model_.add_element_values(b.element, internal_.Kxz[k] * sz, r + n_);
+    // Accumulated in place: a step of a screening model with five branches made
+    // two heap temporaries per block and sensitivity here.
+    Eigen::Map<Eigen::VectorXd> rz(r + 2 * n_ + b.offset, b.size);
+    rz.noalias() -= internal_.fx[k] * model_.element_values(b.element, s);
+    rz.noalias() -= internal_.fz[k] * sz;
   }
 }
 
@@ -86,9 +90,10 @@ void DaeSystem::add_internal_adjoint_terms(const double* lambda, double* r) cons
     const InternalBlock& b = blocks[k];
     const Eigen::Map<const Eigen::VectorXd> lz(lambda + 2 * n_ + b.offset, b.size);
     model_.add_element_values(b.element, internal_.fx[k].transpose() * lz, r);
-    Eigen::Map<Eigen::VectorXd>(r + 2 * n_ + b.offset, b.size) +=
-        internal_.fz[k].transpose() * lz -
-        internal_.Kxz[k].transpose() * model_.element_values(b.element, lambda + n_);
+    Eigen::Map<Eigen::VectorXd> rz(r + 2 * n_ + b.offset, b.size);
+    rz.noalias() += internal_.fz[k].transpose() * lz;
+    if (internal_.coupled[k])
+      rz.noalias() -= internal_.Kxz[k].transpose() * model_.element_values(b.element, lambda + n_);
   }
 }
 

@@ -144,6 +144,7 @@ struct InternalLinearisation {
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 12>> fx;   // ∂f_b/∂x_e
   std::vector<Eigen::MatrixXd> fz;                             // ∂f_b/∂z_b
   std::vector<Eigen::MatrixXd> fq;  // ∂f_b/∂q (the term's parameters)
+  std::vector<char> coupled;        // Kxz ≠ 0: the branch carries stress
   /// Per thread, reused from call to call so that a step does not allocate.
   std::vector<InternalResponse> evolution;
   std::vector<MaterialResponse> response;

@@ -114,6 +114,7 @@ bool FemModel::linearise_internal(const Eigen::Matrix3Xd& x, const Eigen::Matrix
   const bool tangent = request & kTangent, params = request & kParamDerivative;
   if (tangent) {
     out.Kxz.resize(nb);
+    out.coupled.resize(nb);
     out.fx.resize(nb);
     out.fz.resize(nb);
   }
@@ -146,6 +147,7 @@ bool FemModel::linearise_internal(const Eigen::Matrix3Xd& x, const Eigen::Matrix
       const Eigen::Matrix<double, 3, 4> f = el.volume * dP * el.G;
       out.Kxz[k].col(j) = Eigen::Map<const Eigen::Matrix<double, 12, 1>>(f.data());
     }
+    out.coupled[k] = !out.Kxz[k].isZero(0);
     out.fx[k].resize(b.size, 12);
     for (int a = 0; a < 4; ++a)
       for (int i = 0; i < 3; ++i)

@@ -108,9 +108,11 @@ void SchurSolver::assemble_from_last(double cj) {
     A_inv_.resize(blocks.size());
     Kxz_ = lin.Kxz;
     fx_ = lin.fx;
+    coupled_ = lin.coupled;
     for (size_t b = 0; b < blocks.size(); ++b) {
       const int m = blocks[b].size;
       A_inv_[b] = (cj * Eigen::MatrixXd::Identity(m, m) - lin.fz[b]).inverse();
+      if (!coupled_[b]) continue;  // a branch without stress adds nothing to S
       const Eigen::Matrix<double, 12, 12> C = Kxz_[b] * A_inv_[b] * fx_[b];
       model.scatter_element_matrix(blocks[b].element, C, S_.data());
     }
@@ -152,20 +154,20 @@ void SchurSolver::solve(const double* b, double* x) {
       rhs_[P.rowind[p]] += (cj_ * M[p] + D_[p]) * r1_[c];
   const double* r3 = b + 2 * n_;
   for (size_t k = 0; k < blocks.size(); ++k) {  // − K_xz A⁻¹ r₃
+    if (!coupled_[k]) continue;
     const InternalBlock& blk = blocks[k];
-    model.add_element_values(
-        blk.element,
-        -Kxz_[k] * (A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size)),
-        rhs_.data());
+    block_.resize(blk.size);
+    block_.noalias() = A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    model.add_element_values(blk.element, -Kxz_[k] * block_, rhs_.data());
   }
   apply_inverse(rhs_.data(), false);
-  // x₃ before x₁, x₂: the right-hand side may alias the solution.
+  // x₃ before x₁, x₂: the right-hand side may alias the solution (block by block,
+  // x₃'s block k overwrites r₃'s block k only).
   for (size_t k = 0; k < blocks.size(); ++k) {  // x₃ = A⁻¹(r₃ + f_x x₁)
     const InternalBlock& blk = blocks[k];
-    const Eigen::VectorXd z =
-        A_inv_[k] * (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
-                     fx_[k] * model.element_values(blk.element, rhs_.data()));
-    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blk.offset, blk.size) = z;
+    block_ = Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    block_.noalias() += fx_[k] * model.element_values(blk.element, rhs_.data());
+    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blk.offset, blk.size).noalias() = A_inv_[k] * block_;
   }
   for (int i = 0; i < n_; ++i) {
     x[i] = rhs_[i];
@@ -183,29 +185,30 @@ void SchurSolver::solve_adjoint(const double* b, double* x) {
   const double* r3 = b + 2 * n_;
   for (size_t k = 0; k < blocks.size(); ++k) {  // − f_xᵀ A⁻ᵀ r₃
     const InternalBlock& blk = blocks[k];
-    model.add_element_values(
-        blk.element,
-        -fx_[k].transpose() *
-            (A_inv_[k].transpose() * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size)),
-        rhs_.data());
+    block_.resize(blk.size);
+    block_.noalias() =
+        A_inv_[k].transpose() * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    model.add_element_values(blk.element, -fx_[k].transpose() * block_, rhs_.data());
   }
   apply_inverse(rhs_.data(), true);
   // x₃ = −A⁻ᵀ(r₃ + K_xzᵀ x₂), and f_xᵀ x₃ for x₁, before x is written (it may alias b).
-  Eigen::VectorXd fx3 = Eigen::VectorXd::Zero(n_);
-  std::vector<Eigen::VectorXd> z(blocks.size());
+  fx3_.setZero(n_);
+  z_.resize(blocks.size());
   for (size_t k = 0; k < blocks.size(); ++k) {
     const InternalBlock& blk = blocks[k];
-    z[k] = -A_inv_[k].transpose() *
-           (Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size) +
-            Kxz_[k].transpose() * model.element_values(blk.element, rhs_.data()));
-    model.add_element_values(blk.element, fx_[k].transpose() * z[k], fx3.data());
+    block2_ = Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    if (coupled_[k])
+      block2_.noalias() += Kxz_[k].transpose() * model.element_values(blk.element, rhs_.data());
+    z_[k].resize(blk.size);
+    z_[k].noalias() = -A_inv_[k].transpose() * block2_;
+    model.add_element_values(blk.element, fx_[k].transpose() * z_[k], fx3_.data());
   }
   for (size_t k = 0; k < blocks.size(); ++k)
-    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blocks[k].offset, blocks[k].size) = z[k];
+    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blocks[k].offset, blocks[k].size) = z_[k];
   for (int c = 0; c < n_; ++c) {
     double ktb = 0;  // (Kᵀ x₂)_c
     for (int p = P.colptr[c]; p < P.colptr[c + 1]; ++p) ktb += K_[p] * rhs_[P.rowind[p]];
-    x[c] = (r1_[c] + ktb - fx3[c]) / cB;
+    x[c] = (r1_[c] + ktb - fx3_[c]) / cB;
     x[n_ + c] = rhs_[c];
   }
 }
