@@ -65,7 +65,12 @@ bool MaxwellBranch::evaluate(const MaterialPoint& in, unsigned request,
   const Mat3 S = 2 * mu * D;
   out.P = F * S;
   if (request & kEnergy) out.energy = mu * D.squaredNorm();
-  if (request & kTangent) {
+  if ((request & kTangent) && mu == 0) {
+    // A branch screened at g = 0 carries no stress; its tangent loop was a fifth of
+    // a screening step's time.
+    out.dPdF.setZero();
+    out.dPdz.setZero(9, 6);
+  } else if (request & kTangent) {
     // dP = dF S + F (2μ sym(Fᵀ dF)) at fixed Z.
     for (int b = 0; b < 3; ++b)
       for (int a = 0; a < 3; ++a) {
