@@ -44,9 +44,9 @@ struct GradientOptions {
   /// never fails, however its steps are spread in time.
   double step_pace_floor = 1;
   const std::atomic<bool>* interrupt = nullptr;
-  /// Forward sensitivities of these model entries only (null: every model entry);
-  /// the others' columns stay zero. A diagnosis screens each candidate in a model of
-  /// its own and needs only that candidate's columns there.
+  /// Forward sensitivities of these entries only (null: every model entry); the other
+  /// model entries' columns stay zero. A diagnosis screens each candidate in a model
+  /// of its own and needs only that candidate's columns there.
   const std::vector<int>* sensitivity_entries = nullptr;
 };
 

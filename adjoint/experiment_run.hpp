@@ -4,6 +4,7 @@
 /// shares between the objective run, forward sensitivities and the adjoint.
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
+#include <algorithm>
 #include <functional>
 #include <optional>
 
@@ -82,10 +83,16 @@ struct ExperimentRun {
   /// forward-sensitivity gradients and marker sensitivities share this one setup.
   /// `error_control`: see IdasIntegrator::add_sensitivities.
   Eigen::MatrixXd add_sensitivities(IdasIntegrator& integ, bool error_control);
-  /// The entries add_sensitivities carries, in its columns' order: the model's
-  /// (observation entries do not move the model), or GradientOptions::sensitivity_entries.
+  /// The entries add_sensitivities carries, in its columns' order: the model's, or
+  /// those of GradientOptions::sensitivity_entries (observation entries do not move
+  /// the model and are left out).
   std::vector<int> sensitivity_entries() const {
-    return opt.sensitivity_entries ? *opt.sensitivity_entries : map.model_entries();
+    const std::vector<int> model = map.model_entries();
+    if (!opt.sensitivity_entries) return model;
+    std::vector<int> out;
+    for (int j : *opt.sensitivity_entries)
+      if (std::find(model.begin(), model.end(), j) != model.end()) out.push_back(j);
+    return out;
   }
   /// Integrates segments 0 … count−1 of T from (x₀, v₀), each restarted with the
   /// first step its predecessor proposed, and adds their Φ (the targets at t₀ and at

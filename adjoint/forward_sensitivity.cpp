@@ -79,10 +79,8 @@ Eigen::MatrixXd ExperimentRun::add_sensitivities(IdasIntegrator& integ, bool err
   }
 
   // Sensitivity error weights scale with the parameter: dy/d(ln q) has the units
-  // of y; dy/dq is measured per typical q, at least the block's scale. A candidate
-  // effect at 0 measured per |q| got weights of 10³⁰⁰: its sensitivities' Newton
-  // iteration passed its test after one pass, 5–50× off when no nominal parameter's
-  // sensitivity, solved alongside, kept the iteration going.
+  // of y; dy/dq is measured per typical q, at least the block's scale, so that an
+  // entry at 0 keeps finite weights and its Newton test means something.
   Eigen::VectorXd pbar(ns);
   for (int j = 0; j < ns; ++j) {
     const ParameterBlock& b = map.block_of_entry(entries[j]);

@@ -77,6 +77,9 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
                                    const std::string& stem, const std::atomic<bool>* interrupt) {
+  if (m.extended.candidate_specs.size() != with.size())
+    throw Error(fmt::format("internal: the screening model has {} candidates, the list {}",
+                            m.extended.candidate_specs.size(), with.size()));
   const std::vector<int> model_entries = m.problem->map().model_entries();
   const std::set<int> moves(model_entries.begin(), model_entries.end());
   std::vector<int> base, own;  // candidates in the base run; those run one by one
@@ -113,21 +116,24 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     // Its own entries only: the base's columns are known already.
     const std::vector<int> mine =
         entries_of(part.model, part.model.extended.candidate_specs[picked.size() - 1]);
-    std::vector<int> integrated;
-    for (int j : part.model.problem->map().model_entries())
-      if (std::find(mine.begin(), mine.end(), j) != mine.end()) integrated.push_back(j);
-    const GaussNewtonSystem gc = run(part, &integrated);
+    const GaussNewtonSystem gc = run(part, &mine);
     if (!gc.ok) {
       g.error = fmt::format("{} (screening {})", gc.error, with[c]->id);
       return g;
     }
-    if (gc.residual.size() != g.residual.size())
-      throw Error(fmt::format("internal: screening {} sampled {} residuals, the base model {}",
-                              with[c]->id, gc.residual.size(), g.residual.size()));
+    // The same samples in the same order, or the columns would land on wrong rows.
+    bool same = gc.samples.size() == g.samples.size();
+    for (std::size_t i = 0; same && i < g.samples.size(); ++i)
+      same = gc.samples[i].experiment == g.samples[i].experiment &&
+             gc.samples[i].marker == g.samples[i].marker &&
+             gc.samples[i].axis == g.samples[i].axis && gc.samples[i].t == g.samples[i].t;
+    if (!same)
+      throw Error(fmt::format("internal: screening {} sampled other residuals than the base model",
+                              with[c]->id));
     g.rtol = std::max(g.rtol, gc.rtol);
+    const std::set<int> own_entries(mine.begin(), mine.end());
     for (const auto& [here, there] : part.entries)
-      if (std::find(mine.begin(), mine.end(), here) != mine.end())
-        g.jacobian.col(there) = gc.jacobian.col(here);
+      if (own_entries.count(here)) g.jacobian.col(there) = gc.jacobian.col(here);
   }
   g.ok = true;
   return g;

@@ -40,9 +40,9 @@ std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
 /// model (the nominal one and with[refit_form]) extended by it alone. One run of the
 /// base model, with the candidates that only re-read the capture (marker offsets, the
 /// clock, the registration), gives r and the base's columns; each other candidate's
-/// run integrates its own sensitivities only. On V01 the joint run cost more than
-/// the sum of the candidates' separate ones, each term slowing every step of every
-/// sensitivity. The per-candidate models are written to `dir`/`stem`-<id>.yaml.
+/// run integrates its own sensitivities only: in a joint run every candidate's terms
+/// would slow every step of every sensitivity. The per-candidate models are written
+/// to `dir`/`stem`-<id>.yaml. `m` must have been made from `with` and `refit_form`.
 GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const Scenario& nominal,
                                    const std::vector<const Candidate*>& with, int refit_form,

@@ -76,8 +76,7 @@ void DaeSystem::add_internal_product(const double* s, double* r) const {
     const Eigen::Map<const Eigen::VectorXd> sz(s + 2 * n_ + b.offset, b.size);
     // A branch without stress (a screened one at g = 0) owes the forces nothing.
     if (internal_.coupled[k]) model_.add_element_values(b.element, internal_.Kxz[k] * sz, r + n_);
-    // Accumulated in place: a step of a screening model with five branches made
-    // two heap temporaries per block and sensitivity here.
+    // Accumulated in place: no heap temporary per block and sensitivity.
     Eigen::Map<Eigen::VectorXd> rz(r + 2 * n_ + b.offset, b.size);
     rz.noalias() -= internal_.fx[k] * model_.element_values(b.element, s);
     rz.noalias() -= internal_.fz[k] * sz;

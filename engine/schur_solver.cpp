@@ -4,6 +4,7 @@
 #include <klu.h>
 
 #include <Eigen/LU>
+#include <algorithm>
 
 #include "base/error.hpp"
 
@@ -109,6 +110,11 @@ void SchurSolver::assemble_from_last(double cj) {
     Kxz_ = lin.Kxz;
     fx_ = lin.fx;
     coupled_ = lin.coupled;
+    // Sized for the largest block once: blocks of several sizes (a plugin's beside a
+    // Maxwell branch) then share it without reallocating in the solves.
+    int largest = 0;
+    for (const auto& blk : blocks) largest = std::max(largest, blk.size);
+    block_.resize(largest);
     for (size_t b = 0; b < blocks.size(); ++b) {
       const int m = blocks[b].size;
       A_inv_[b] = (cj * Eigen::MatrixXd::Identity(m, m) - lin.fz[b]).inverse();
@@ -156,18 +162,19 @@ void SchurSolver::solve(const double* b, double* x) {
   for (size_t k = 0; k < blocks.size(); ++k) {  // − K_xz A⁻¹ r₃
     if (!coupled_[k]) continue;
     const InternalBlock& blk = blocks[k];
-    block_.resize(blk.size);
-    block_.noalias() = A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
-    model.add_element_values(blk.element, -Kxz_[k] * block_, rhs_.data());
+    auto v = block_.head(blk.size);
+    v.noalias() = A_inv_[k] * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    model.add_element_values(blk.element, -Kxz_[k] * v, rhs_.data());
   }
   apply_inverse(rhs_.data(), false);
   // x₃ before x₁, x₂: the right-hand side may alias the solution (block by block,
   // x₃'s block k overwrites r₃'s block k only).
   for (size_t k = 0; k < blocks.size(); ++k) {  // x₃ = A⁻¹(r₃ + f_x x₁)
     const InternalBlock& blk = blocks[k];
-    block_ = Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
-    block_.noalias() += fx_[k] * model.element_values(blk.element, rhs_.data());
-    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blk.offset, blk.size).noalias() = A_inv_[k] * block_;
+    auto v = block_.head(blk.size);
+    v = Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    v.noalias() += fx_[k] * model.element_values(blk.element, rhs_.data());
+    Eigen::Map<Eigen::VectorXd>(x + 2 * n_ + blk.offset, blk.size).noalias() = A_inv_[k] * v;
   }
   for (int i = 0; i < n_; ++i) {
     x[i] = rhs_[i];
@@ -185,10 +192,10 @@ void SchurSolver::solve_adjoint(const double* b, double* x) {
   const double* r3 = b + 2 * n_;
   for (size_t k = 0; k < blocks.size(); ++k) {  // − f_xᵀ A⁻ᵀ r₃
     const InternalBlock& blk = blocks[k];
-    block_.resize(blk.size);
-    block_.noalias() =
+    auto v = block_.head(blk.size);
+    v.noalias() =
         A_inv_[k].transpose() * Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
-    model.add_element_values(blk.element, -fx_[k].transpose() * block_, rhs_.data());
+    model.add_element_values(blk.element, -fx_[k].transpose() * v, rhs_.data());
   }
   apply_inverse(rhs_.data(), true);
   // x₃ = −A⁻ᵀ(r₃ + K_xzᵀ x₂), and f_xᵀ x₃ for x₁, before x is written (it may alias b).
@@ -196,11 +203,12 @@ void SchurSolver::solve_adjoint(const double* b, double* x) {
   z_.resize(blocks.size());
   for (size_t k = 0; k < blocks.size(); ++k) {
     const InternalBlock& blk = blocks[k];
-    block2_ = Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
+    auto v = block_.head(blk.size);
+    v = Eigen::Map<const Eigen::VectorXd>(r3 + blk.offset, blk.size);
     if (coupled_[k])
-      block2_.noalias() += Kxz_[k].transpose() * model.element_values(blk.element, rhs_.data());
+      v.noalias() += Kxz_[k].transpose() * model.element_values(blk.element, rhs_.data());
     z_[k].resize(blk.size);
-    z_[k].noalias() = -A_inv_[k].transpose() * block2_;
+    z_[k].noalias() = -A_inv_[k].transpose() * v;
     model.add_element_values(blk.element, fx_[k].transpose() * z_[k], fx3_.data());
   }
   for (size_t k = 0; k < blocks.size(); ++k)

@@ -72,9 +72,9 @@ class SchurSolver {
   std::vector<Eigen::Matrix<double, 12, Eigen::Dynamic>> Kxz_;
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 12>> fx_;
   std::vector<char> coupled_;  // InternalLinearisation::coupled
-  /// One block's values in the eliminations, reused so that a solve does not allocate
-  /// (per block and sensitivity, the screening model's cost), and the adjoint's x₃.
-  Eigen::VectorXd block_, block2_, fx3_;
+  /// One block's values in the eliminations (sized for the largest block) and the
+  /// adjoint's f_xᵀ x₃, reused so that a solve does not allocate.
+  Eigen::VectorXd block_, fx3_;
   std::vector<Eigen::VectorXd> z_;
   std::unique_ptr<Klu> klu_;
   std::unique_ptr<Cholmod> cholmod_;

@@ -16,8 +16,8 @@ const std::vector<ParamInfo>& FibreTerm::params() const {
 bool FibreTerm::evaluate(const MaterialPoint& in, unsigned request, MaterialResponse& out) const {
   const double k = in.q[0], th = in.q[1], ph = in.q[2];
   if (k == 0 && !(request & kParamDerivative)) {
-    // A fibre screened at k = 0 loads nothing; its direction's sin and cos were a
-    // quarter of a step of the diagnosis's anisotropy model.
+    // A fibre screened at k = 0 loads nothing: zero only what was asked for (many
+    // such terms are evaluated per element and step).
     out.energy = 0;
     out.P.setZero();
     if (request & kTangent) out.dPdF.setZero();
@@ -53,7 +53,7 @@ bool FibreTerm::evaluate(const MaterialPoint& in, unsigned request, MaterialResp
       out.dPdq.col(col++) = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(dP.data());
     }
   }
-  return out.P.allFinite();
+  return std::isfinite(x) && std::isfinite(k);
 }
 
 }  // namespace kelvin

@@ -5,9 +5,8 @@
 ///   Ψ = k/2 (I₄ − 1)²,   I₄ = ‖F a‖²,   P = 2k (I₄ − 1) F a aᵀ,
 ///   a = (sin θ cos φ, sin θ sin φ, cos θ).
 /// The direction is two parameters, so it can be given or fitted with k; k = 0 is
-/// the isotropic model (the diagnosis's nested extension). Tangents in closed form
-/// (by forward-mode AD they were most of a step of the diagnosis's anisotropy
-/// model, thirteen fibre terms at k = 0).
+/// the isotropic model (the diagnosis's nested extension). Tangents in closed form:
+/// the diagnosis evaluates many such terms per element and step.
 #include "materials/material.hpp"
 
 namespace kelvin {

@@ -66,8 +66,7 @@ bool MaxwellBranch::evaluate(const MaterialPoint& in, unsigned request,
   out.P = F * S;
   if (request & kEnergy) out.energy = mu * D.squaredNorm();
   if ((request & kTangent) && mu == 0) {
-    // A branch screened at g = 0 carries no stress; its tangent loop was a fifth of
-    // a screening step's time.
+    // A branch screened at g = 0 carries no stress: skip the tangent's loop.
     out.dPdF.setZero();
     out.dPdz.setZero(9, 6);
   } else if (request & kTangent) {
