@@ -174,14 +174,16 @@ Scenario nominal_scenario(const fs::path& dir, const std::string& truth) {
   return load_scenario((dir / "nominal.yaml").string());
 }
 
+// The truth of the nesting tests: the nominal bar 25 % stiffer in shear.
+const std::string kStiffer = R"(  density: 1100
+  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+  viscous: { model: newtonian, nu: 30 })";
+
 // Every candidate switched on at its nominal value leaves Φ as it was: the nominal
 // model is inside each extended family.
 TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
   const fs::path dir = test::scratch("diagnosis-nested");
-  const std::string stiffer = R"(  density: 1100
-  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
-  viscous: { model: newtonian, nu: 30 })";
-  const Scenario nominal = nominal_scenario(dir, stiffer);
+  const Scenario nominal = nominal_scenario(dir, kStiffer);
   const std::vector<Candidate> all = builtin_candidates(nominal);
   std::vector<std::string> ids;
   for (const auto& c : all) ids.push_back(c.id);
@@ -255,10 +257,7 @@ TEST(ExtendedScenario, EveryCandidateAtItsNominalValueChangesNothing) {
 // going). Agreement is to ~10⁻⁶ at rtol 10⁻⁷.
 TEST(ScreeningSystem, PerCandidateColumnsAreTheJointModels) {
   const fs::path dir = test::scratch("diagnosis-screening-system");
-  const std::string stiffer = R"(  density: 1100
-  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
-  viscous: { model: newtonian, nu: 30 })";
-  const Scenario nominal = nominal_scenario(dir, stiffer);
+  const Scenario nominal = nominal_scenario(dir, kStiffer);
   const std::vector<Candidate> all = builtin_candidates(nominal);
   // The compliant clamp's nominal pads are not exactly rigid (see above): its model
   // moves the tracks by 10⁻⁴, so the joint model is not the reference for it.
