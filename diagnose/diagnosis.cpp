@@ -207,15 +207,6 @@ std::string field_region(const Model& m, const Eigen::VectorXd& p, const Scenari
   return "whole body";
 }
 
-/// The missing force's likelihood-ratio statistic N (rms₀² − rms²)/σ̂² against the
-/// χ² quantile of its degrees of freedom.
-void judge(MissingForce& f, int samples, double sigma, double alpha) {
-  if (!f.ok) return;
-  f.statistic =
-      samples * (f.rms_before * f.rms_before - f.rms_after * f.rms_after) / (sigma * sigma);
-  f.threshold = chi_square_quantile(alpha, f.dof);
-}
-
 std::string describe(const MissingForce& f) {
   if (!f.ok) return "not found: " + f.error;
   std::string shares;
@@ -501,9 +492,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     say(fmt::format("  missing force: {} knots in time × {} segments × 3 axes, {} evaluations",
                     std::lround(mfs.knots_per_second * nominal.time.end), mfs.segments,
                     mfs.evaluations));
-    d.missing_force = fit_missing_force(*base.problem, nominal, p_nominal, axis, d.noise.sigma, mfs,
-                                        (out / "missing-force").string(), o.interrupt, o.progress);
-    judge(d.missing_force, d.nominal_train.samples, d.noise.sigma, d.settings.alpha);
+    d.missing_force =
+        fit_missing_force(*base.problem, nominal, p_nominal, axis,
+                          {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
+                          (out / "missing-force").string(), o.interrupt, o.progress);
     say("  missing force: " + describe(d.missing_force));
     d.seconds.missing_force = since(tf);
     t0 = Clock::now();
@@ -1050,9 +1042,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
             d.effect);
       } else {
         d.remaining_force =
-            fit_missing_force(*with.problem, *with.scenario, x.p, axis, d.noise.sigma, mfs,
+            fit_missing_force(*with.problem, *with.scenario, x.p, axis,
+                              {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
                               (out / "missing-force-after").string(), o.interrupt, o.progress);
-        judge(d.remaining_force, d.nominal_train.samples, d.noise.sigma, d.settings.alpha);
       }
       say("  missing force left: " + describe(d.remaining_force));
       d.seconds.missing_force += since(tf);

@@ -32,7 +32,7 @@ struct MissingForce {
   double seconds = 0;
   double rms_before = 0, rms_after = 0;  // training misfit RMS (m) without and with the field
   /// N (rms_before² − rms_after²)/σ̂² against the χ² quantile for as many degrees of
-  /// freedom as the field has values: below it, the field fits noise (set by the caller).
+  /// freedom as the field has values: below it, the field fits noise.
   double statistic = 0, threshold = 0;
   int dof = 0;
   double peak_time = 0;  // the knot where ∫ |f|² dV is largest (s)
@@ -41,13 +41,20 @@ struct MissingForce {
   std::vector<std::string> files;  // in the output directory
 };
 
+/// What the field's statistic is judged against.
+struct MissingForceNoise {
+  double sigma = 0;  // estimated noise per coordinate (m)
+  int samples = 0;   // N: residual entries of the training capture
+  double alpha = 0;  // significance level of the threshold
+};
+
 /// Fits the field to `nominal` (the training scenario) at its fitted parameters
-/// p_nominal of `problem`, σ the estimated noise (m); writes the scenarios it fits
-/// and the field's files (body-force.csv, body-force.pvd) into `dir`.
+/// p_nominal of `problem` and judges it; writes the scenarios it fits and the
+/// field's files (body-force.csv, body-force.pvd) into `dir`.
 MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
-                               const Eigen::VectorXd& p_nominal, const BodyAxis& axis, double sigma,
-                               const MissingForceSettings& settings, const std::string& dir,
-                               const std::atomic<bool>* interrupt,
+                               const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
+                               const MissingForceNoise& noise, const MissingForceSettings& settings,
+                               const std::string& dir, const std::atomic<bool>* interrupt,
                                const std::function<void(const std::string&)>& progress);
 
 }  // namespace kelvin

@@ -234,13 +234,16 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     c.plateau = false;
     if (plateau && !c.outcome.interrupted && !c.budget_spent) {
       gave_up = false;  // converged, not given up
-      c.outcome.stop_reason =
-          fmt::format("converged: Φ improved by less than {} over the last {} accepted moves",
-                      c.tolerance_scale > 1
-                          ? fmt::format("{:g} %", 100 * kCoarsePlateauGain)
-                          : fmt::format("its accuracy at the scenario's tolerances ({:.2g} %)",
-                                        100 * c.accuracy),
-                      kPlateauWindow);
+      const double floor = c.tolerance_scale > 1 ? kCoarsePlateauGain : c.accuracy;
+      c.outcome.stop_reason = fmt::format(
+          "converged: Φ improved by less than {} over the last {} accepted moves",
+          options.precision > floor
+              ? fmt::format("the precision asked for ({:.2g} %)", 100 * options.precision)
+          : c.tolerance_scale > 1
+              ? fmt::format("{:g} %", 100 * kCoarsePlateauGain)
+              : fmt::format("its accuracy at the scenario's tolerances ({:.2g} %)",
+                            100 * c.accuracy),
+          kPlateauWindow);
     }
     // L-BFGS reports a force_stop inside its line search as a plain failure.
     if (c.outcome.interrupted || c.budget_spent) {

@@ -259,7 +259,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
         const double before = c.stage_best[k - 1 - kPlateauWindow], now = c.stage_best.back();
         const double gain = (before - now) / std::abs(now);
         const double floor =
-            c.tolerance_scale > 1 ? kCoarsePlateauGain : std::max(c.accuracy, c.options.precision);
+            std::max(c.tolerance_scale > 1 ? kCoarsePlateauGain : c.accuracy, c.options.precision);
         if (floor > 0 && gain < floor) c.plateau = true;
       }
     }

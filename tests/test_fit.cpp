@@ -19,6 +19,7 @@
 
 #include "adjoint/uncertainty.hpp"
 #include "engine/csv.hpp"
+#include "fit/fit_context.hpp"
 #include "fit/fit_loop.hpp"
 #include "fit/fit_state.hpp"
 #include "test_support.hpp"
@@ -130,7 +131,7 @@ struct Fitted {
 
 Fitted fit(const path& dir, const std::string& tracks, const std::string& start = kStart,
            const std::string& fit_section = kFitSection, double start_tolerance_scale = 1,
-           double rtol = 1e-7, bool gauss_newton_start = false) {
+           double rtol = 1e-7, bool gauss_newton_start = false, double precision = 0) {
   Fitted f;
   test::write_text(dir / "fit.yaml", bar(start, tracks, fit_section, kShaken, rtol));
   f.scenario = std::make_unique<Scenario>(load_scenario((dir / "fit.yaml").string()));
@@ -141,6 +142,7 @@ Fitted fit(const path& dir, const std::string& tracks, const std::string& start 
   o.xtol_rel = f.scenario->fit.xtol_rel;
   o.start_tolerance_scale = start_tolerance_scale;
   o.gauss_newton_start = gauss_newton_start;
+  o.precision = precision;
   f.outcome = run_fit(*f.problem, f.problem->map().initial(), o);
   f.q.resize(f.problem->map().size());
   for (int j = 0; j < f.q.size(); ++j) f.q[j] = f.problem->map().value(f.outcome.p, j);
@@ -316,6 +318,28 @@ TEST(Fit, MarkerNoiseGivesRmsAtTheNoiseLevelAndHonestStandardErrors) {
     EXPECT_LT(std::abs(z), 3.0) << f.problem->map().label(j) << " fitted " << f.q[j] << " ± "
                                 << u.std_error[j] << " true " << kTrue[j];
   }
+}
+
+// A caller that resolves only a relative change P of Φ (the diagnosis, from its χ²
+// thresholds) gets a fit that ends at the first window of accepted moves gaining less
+// than P, and says so; here P is far above Φ's accuracy at rtol 1e-7.
+TEST(Fit, APrecisionAskedForEndsTheFitAtTheFirstPlateauOfThatSize) {
+  const path dir = test::scratch("fit-precision");
+  const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(kTruth)),
+                                            dir / "noisy.csv", 1e-3, 0.0, 1, 11);
+  const double precision = 0.01;
+  const Fitted f = fit(dir, tracks, kStart, kFitSection, 1, 1e-7, false, precision);
+  EXPECT_NE(f.outcome.stop_reason.find("the precision asked for (1 %)"), std::string::npos)
+      << f.outcome.stop_reason;
+  std::vector<double> best;  // the best Φ after each accepted move
+  for (const FitRecord& r : f.outcome.history)
+    if (r.accepted) best.push_back(r.objective);
+  constexpr size_t w = fit_detail::kPlateauWindow;
+  ASSERT_GT(best.size(), w);
+  const auto gain = [&](size_t i) { return (best[i - w] - best[i]) / best[i]; };
+  EXPECT_LT(gain(best.size() - 1), precision);
+  for (size_t i = w; i + 1 < best.size(); ++i) EXPECT_GE(gain(i), precision) << "move " << i;
+  EXPECT_LT(best.back(), 0.1 * best.front());  // it did fit: the start is twice off
 }
 
 TEST(Fit, AGaussNewtonStepThatPredictsAGainWithinTheAccuracyEndsTheFit) {
