@@ -152,20 +152,29 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   u.sigma = std::sqrt(r.squaredNorm() / (N - n));
 
   // Unit columns make the rank decision independent of parameter units (log or not).
-  const Eigen::VectorXd norms = J.colwise().norm().transpose();
+  // A parameter that moves no marker here (a fibre's angles, a branch's relaxation
+  // time while its modulus is at its nested 0) is left out of the factorisation: its
+  // row of root_inverse is zero, so a scaled fit holds it until a later restart.
+  const Eigen::VectorXd all_norms = J.colwise().norm().transpose();
+  std::vector<int> moving, still;
   for (int j = 0; j < n; ++j)
-    if (!(norms[j] > 1e-14 * norms.maxCoeff())) {
-      u.error = fmt::format(
-          "{} does not move any observed marker: it is not identifiable from these observations",
-          parameter_name(map, j));
-      return u;
-    }
-  const Eigen::MatrixXd Js = J * norms.cwiseInverse().asDiagonal();
-  // SVD of R (Js = QR) has the accuracy of an SVD of Js at the cost of an n × n one;
+    (all_norms[j] > 1e-14 * all_norms.maxCoeff() ? moving : still).push_back(j);
+  const int m = static_cast<int>(moving.size());
+  if (m == 0) {
+    u.error = "no fitted parameter moves any observed marker";
+    return u;
+  }
+  Eigen::VectorXd norms(m);
+  Eigen::MatrixXd Js(N, m);
+  for (int k = 0; k < m; ++k) {
+    norms[k] = all_norms[moving[k]];
+    Js.col(k) = J.col(moving[k]) / norms[k];
+  }
+  // SVD of R (Js = QR) has the accuracy of an SVD of Js at the cost of an m × m one;
   // forming JᵀJ would square the condition number.
   const Eigen::MatrixXd R = Eigen::HouseholderQR<Eigen::MatrixXd>(Js)
                                 .matrixQR()
-                                .topRows(n)
+                                .topRows(m)
                                 .triangularView<Eigen::Upper>();
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeFullV);
   const Eigen::VectorXd sv = svd.singularValues();
@@ -175,8 +184,16 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   const double threshold = std::max(100 * rtol, 1e-12) * sv[0];
   // A square root of (JᵀJ)⁻¹ whose unresolved directions are held at the threshold:
   // what a Gauss–Newton scaling of the fit needs even where the covariance is refused.
-  u.root_inverse = norms.cwiseInverse().asDiagonal() * svd.matrixV() *
-                   sv.cwiseMax(threshold).cwiseInverse().asDiagonal();
+  const Eigen::MatrixXd root = norms.cwiseInverse().asDiagonal() * svd.matrixV() *
+                               sv.cwiseMax(threshold).cwiseInverse().asDiagonal();
+  u.root_inverse = Eigen::MatrixXd::Zero(n, n);
+  for (int k = 0; k < m; ++k) u.root_inverse.row(moving[k]).head(m) = root.row(k);
+  if (!still.empty()) {
+    u.error = fmt::format(
+        "{} does not move any observed marker: it is not identifiable from these observations",
+        parameter_name(map, still[0]));
+    return u;
+  }
   if (!(sv[n - 1] > threshold)) {
     const Eigen::VectorXd dp = norms.cwiseInverse().asDiagonal() * svd.matrixV().col(n - 1);
     u.error = fmt::format(

@@ -33,7 +33,8 @@ bool gauss_newton_model(const ParameterUncertainty& u, double phi, int n, Eigen:
 /// Gauss–Newton Hessian is a multiple of the identity. B's scale makes L-BFGS's
 /// first step (length ½ along −∇_z, see objective_scale) the Gauss–Newton step
 /// −(1/κ)(JᵀJ)⁻¹∇Φ, κ = 2Φ / ‖r‖² relating Φ's time integral to the sum over
-/// frames. False when JᵀJ is unavailable (too many parameters, singular).
+/// frames. False when JᵀJ is unavailable (too many parameters). A parameter that
+/// moves no marker at the best point keeps its value until the next restart.
 bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd& gradient) {
   UncertaintyAtPoint& cache = c.outcome.uncertainty;
   if (!cache.holds(best)) {
@@ -61,6 +62,9 @@ double predicted_gain(const Context& c, const Eigen::VectorXd& gradient) {
   if (cache.p.size() != gradient.size() || !c.terms.empty() ||
       !gauss_newton_model(cache.value, phi, static_cast<int>(gradient.size()), L, beta))
     return NAN;
+  // A parameter held by the scaling (it moved no marker where JᵀJ was computed) is
+  // outside the model: it predicts nothing about what moving it would gain.
+  if ((L.rowwise().squaredNorm().array() == 0).any()) return NAN;
   // The decrease to the Gauss–Newton model's minimum, ½ gᵀ(−Δp_GN) = ½ β |Lᵀg|², over Φ.
   const double gain = 0.5 * beta * (L.transpose() * gradient).squaredNorm();
   return std::isfinite(gain) ? gain / phi : NAN;

@@ -267,6 +267,51 @@ INSTANTIATE_TEST_SUITE_P(
                                "late"}),
     [](const auto& info) { return info.param.name; });
 
+// A fibre fitted from its nested k = 0 with its direction free: there the angles move
+// no marker, so JᵀJ is singular in them. The Gauss–Newton scaling of the start holds
+// them (zero rows of root_inverse) and scales the rest, instead of refusing and
+// leaving L-BFGS unscaled (V10's anisotropy refit then tried a point 8× off in rms);
+// once k is off zero a restart frees them, and stiffness and direction come back.
+TEST(Extensions, AFibreAndItsDirectionAreRecoveredFromZeroStiffness) {
+  const fs::path dir = test::scratch("extensions-fibre-direction");
+  const std::string tracks = test::simulate_tracks(dir, "truth", bar(kWithFibre, kMarkers, 0.15));
+  const std::string nominal = R"(
+  density: 1100
+  elastic:
+    - { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
+    - { model: fibre, k: 0, theta: 0.6, phi: 1.4 }
+  viscous: { model: newtonian, nu: 20 })";
+  const Scenario s = observing(dir, "fit", nominal, tracks, "", 0.15);
+  FitProblem problem(
+      s, {linear_fit_parameter("elastic.k", 0, 1e7), linear_fit_parameter("elastic.theta", -4, 4),
+          linear_fit_parameter("elastic.phi", -4, 4)});
+  const ParameterUncertainty u = gauss_newton_uncertainty(problem, problem.map().initial());
+  ASSERT_EQ(u.root_inverse.rows(), 3);
+  EXPECT_GT(u.root_inverse.row(0).norm(), 0);
+  EXPECT_EQ(u.root_inverse.row(1).norm(), 0);
+  EXPECT_EQ(u.root_inverse.row(2).norm(), 0);
+  EXPECT_FALSE(u.ok);
+  EXPECT_NE(u.error.find("theta does not move any observed marker"), std::string::npos) << u.error;
+
+  FitOptions o;
+  o.max_evaluations = 60;
+  o.gauss_newton_start = true;
+  std::string lines;
+  o.on_progress = [&](const std::string& line) { lines += line + "\n"; };
+  const FitOutcome out = run_fit(problem, problem.map().initial(), o);
+  EXPECT_NE(lines.find("the start point is evaluated: going on in Gauss–Newton-scaled"),
+            std::string::npos)
+      << lines;
+  const double k = problem.map().value(out.p, 0), theta = problem.map().value(out.p, 1),
+               phi = problem.map().value(out.p, 2);
+  EXPECT_NEAR(k, 1e5, 0.02e5) << out.stop_reason << " after " << out.evaluations;
+  // The fibre's axis, not its sign: a and −a are the same fibre.
+  const Eigen::Vector3d a(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi),
+                          std::cos(theta));
+  EXPECT_GT(std::abs(a.dot(Eigen::Vector3d(0, 1, 1).normalized())), std::cos(0.02))
+      << "theta " << theta << " phi " << phi;
+}
+
 /// The truth's tracks as a capture whose clock runs late by `lag`, with N(0, σ²) on every
 /// coordinate and a burst of occluded frames per marker (frames [first + 7 m, +5)).
 std::string late_noisy_occluded(const std::string& file, const fs::path& out, double lag,
