@@ -135,6 +135,7 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
     // RMS over 17 evaluations after the third, at LR 25 against 1 058.
     const double resolved = 0.1 * mf.threshold * noise.sigma * noise.sigma;
     o.precision = resolved / std::max(noise.samples * mf.rms_before * mf.rms_before, 1e-300);
+    o.start_objective = before.phi;
     o.on_evaluation = [&](const FitRecord& r) {
       if (progress && r.accepted)
         progress(fmt::format("  missing force: eval {:3d}  rms {:8.4f} mm  {:7.1f} s", r.evaluation,
@@ -146,12 +147,16 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
       mf.error = out.history.empty() ? out.stop_reason : out.history.back().error;
       return mf;
     }
-    const Evaluation after = force.evaluate(out.p, exact);
-    if (!after.ok) {
-      mf.error = after.error;
-      return mf;
+    if (out.best.tolerance_scale == 1) {
+      mf.rms_after = out.best.rms / std::sqrt(3.0);
+    } else {
+      const Evaluation after = force.evaluate(out.p, exact);
+      if (!after.ok) {
+        mf.error = after.error;
+        return mf;
+      }
+      mf.rms_after = after.rms / std::sqrt(3.0);
     }
-    mf.rms_after = after.rms / std::sqrt(3.0);
     mf.statistic = noise.samples * (mf.rms_before * mf.rms_before - mf.rms_after * mf.rms_after) /
                    (noise.sigma * noise.sigma);
     FemModel& model = force.experiment(0).model();

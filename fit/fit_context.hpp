@@ -100,6 +100,7 @@ struct Context {
   bool gauss_newton_start_pending = false;
   std::vector<double> stage_best;  // the best objective after each accepted move of the stage
   bool plateau = false;            // see kPlateauWindow
+  bool coarse_gain_lost = false;   // see FitOptions::start_objective
   /// At the last stage in Gauss–Newton-scaled parameters: the relative gain the
   /// Gauss–Newton model predicts from the best point, once it fell within Φ's
   /// accuracy (the fit has converged; NaN before).

@@ -214,6 +214,13 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
         continue;
       }
     }
+    if (c.coarse_gain_lost && !c.outcome.interrupted) {
+      c.outcome.stop_reason = fmt::format(
+          "converged: the coarse stages' best, re-measured at the scenario's tolerances, gains "
+          "less than the precision asked for ({:.2g} %) on the start",
+          100 * options.precision);
+      break;
+    }
     if (std::isfinite(c.gain_within_accuracy) && !c.outcome.interrupted) {
       c.outcome.stop_reason = fmt::format(
           "converged: a Gauss–Newton step from the best point predicts a gain of {:.2g} % of Φ, "

@@ -60,6 +60,13 @@ struct FitOptions {
   /// over the plateau window, or from a restart, is no gain (the diagnosis sets it from
   /// its χ² thresholds; a single-stage fit has no measured accuracy to stop at).
   double precision = 0;
+  /// Φ at p0 at the scenario's tolerances, when the caller measured it (NaN: not).
+  /// With a precision, a coarse stage whose best, re-measured at the scenario's
+  /// tolerances, gains less than that on it ends the fit there: what the stage gained
+  /// was its own integration error (V01's missing force: 0.4700 mm at rtol 1e-3,
+  /// 0.4755 re-measured, 0.4703 with no field; the last stage spent 4 evaluations,
+  /// 400 s, to reach 0.4697).
+  double start_objective = NAN;
   /// Start in Gauss–Newton-scaled parameters: after the start point's evaluation, one
   /// sensitivity solve there gives JᵀJ and the fit goes on as after a Gauss–Newton
   /// restart (L-BFGS only). For a start in a curved valley of correlated parameters

@@ -229,6 +229,10 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
         c.remeasured = r.objective;
         if (std::isfinite(c.handover_objective) && r.objective > 0)
           c.accuracy = std::abs(c.handover_objective - r.objective) / r.objective / kStageRatio;
+        const double start = c.options.start_objective;
+        if (c.tolerance_scale <= 1 && c.options.precision > 0 && std::isfinite(start) &&
+            r.objective > (1 - c.options.precision) * start)
+          c.coarse_gain_lost = true;
       }
       if (ev.gradient.size()) {
         c.best_g = g;
@@ -277,7 +281,8 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     if (interrupted) {
       c.outcome.interrupted = true;
       c.opt->force_stop();
-    } else if (c.plateau || c.gauss_newton_start_pending || std::isfinite(c.gain_within_accuracy)) {
+    } else if (c.plateau || c.gauss_newton_start_pending || c.coarse_gain_lost ||
+               std::isfinite(c.gain_within_accuracy)) {
       c.opt->force_stop();
     } else if (c.outcome.evaluations >= c.budget) {
       // NLopt's L-BFGS checks maxeval only between iterations.

@@ -131,7 +131,8 @@ struct Fitted {
 
 Fitted fit(const path& dir, const std::string& tracks, const std::string& start = kStart,
            const std::string& fit_section = kFitSection, double start_tolerance_scale = 1,
-           double rtol = 1e-7, bool gauss_newton_start = false, double precision = 0) {
+           double rtol = 1e-7, bool gauss_newton_start = false, double precision = 0,
+           double start_objective = NAN) {
   Fitted f;
   test::write_text(dir / "fit.yaml", bar(start, tracks, fit_section, kShaken, rtol));
   f.scenario = std::make_unique<Scenario>(load_scenario((dir / "fit.yaml").string()));
@@ -143,6 +144,7 @@ Fitted fit(const path& dir, const std::string& tracks, const std::string& start 
   o.start_tolerance_scale = start_tolerance_scale;
   o.gauss_newton_start = gauss_newton_start;
   o.precision = precision;
+  o.start_objective = start_objective;
   f.outcome = run_fit(*f.problem, f.problem->map().initial(), o);
   f.q.resize(f.problem->map().size());
   for (int j = 0; j < f.q.size(); ++j) f.q[j] = f.problem->map().value(f.outcome.p, j);
@@ -340,6 +342,26 @@ TEST(Fit, APrecisionAskedForEndsTheFitAtTheFirstPlateauOfThatSize) {
   EXPECT_LT(gain(best.size() - 1), precision);
   for (size_t i = w; i + 1 < best.size(); ++i) EXPECT_GE(gain(i), precision) << "move " << i;
   EXPECT_LT(best.back(), 0.1 * best.front());  // it did fit: the start is twice off
+}
+
+// A coarse stage's best, re-measured at the scenario's tolerances, that gains less
+// than the precision on the start's value there (FitOptions::start_objective) ends
+// the fit at that re-measure: its gain was the coarse integration's. Here the start's
+// value is given as 0, so no gain can count, and the coarse stage's moves stand.
+TEST(Fit, ACoarseGainLostAtTheScenarioTolerancesEndsTheFit) {
+  const path dir = test::scratch("fit-coarse-gain-lost");
+  const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(kTruth)),
+                                            dir / "noisy.csv", 1e-3, 0.0, 1, 11);
+  const Fitted f = fit(dir, tracks, kStart, kFitSection, 10, 1e-7, false, 0.01, 0.0);
+  EXPECT_NE(f.outcome.stop_reason.find("re-measured at the scenario's tolerances"),
+            std::string::npos)
+      << f.outcome.stop_reason;
+  const auto& h = f.outcome.history;
+  ASSERT_GE(h.size(), 2u);
+  EXPECT_EQ(h.back().tolerance_scale, 1);
+  EXPECT_TRUE(h.back().accepted);  // the re-measure of the coarse best
+  for (size_t i = 0; i + 1 < h.size(); ++i) EXPECT_EQ(h[i].tolerance_scale, 10) << i;
+  EXPECT_LT(h.back().objective, 0.5 * h.front().objective);
 }
 
 TEST(Fit, AGaussNewtonStepThatPredictsAGainWithinTheAccuracyEndsTheFit) {
