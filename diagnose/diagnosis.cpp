@@ -209,6 +209,11 @@ std::string field_region(const Model& m, const Eigen::VectorXd& p, const Scenari
 
 std::string describe(const MissingForce& f) {
   if (!f.ok) return "not found: " + f.error;
+  if (f.where.empty())
+    return fmt::format(
+        "rms {:.4f} mm: no field fitted at the first stage's tolerances does better at the "
+        "scenario's, so none is kept (noise alone would reach LR {:.1f})",
+        f.rms_before * 1e3, f.threshold);
   std::string shares;
   for (const auto& r : f.regions)
     shares += fmt::format("{}{} {:.0f} %", shares.empty() ? "" : ", ", r.name, 100 * r.share);

@@ -65,6 +65,15 @@ double heldout_rms(const std::vector<HeldOutFigures>& h, bool after) {
   return n ? std::sqrt(sq / n) : NAN;
 }
 
+/// Where the field acts, or that none was kept (see fit_missing_force).
+std::string where_of(const MissingForce& f) {
+  if (f.where.empty())
+    return "No field fitted at the first stage's tolerances does better than none at the "
+           "scenario's, so none is kept.";
+  return fmt::format("Most of it acts in the **{}**, largest at t = {:.3g} s.", f.where,
+                     f.peak_time);
+}
+
 /// A missing-force field's figures as a JSON object ({"error": …} when not found).
 std::string missing_force_json(const MissingForce& f, bool asked) {
   std::string j;
@@ -447,11 +456,11 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
       fmt::format_to(
           out,
           "The missing force left with it in the model takes the training RMS from "
-          "{:.4f} to {:.4f} mm (likelihood ratio {:.1f} against {:.1f}: {}); most of "
-          "it in the {} (`missing-force-after/body-force.pvd`).\n\n{}\n",
+          "{:.4f} to {:.4f} mm (likelihood ratio {:.1f} against {:.1f}: {}). {} "
+          "(`missing-force-after/body-force.pvd`)\n\n{}\n",
           f.rms_before * 1e3, f.rms_after * 1e3, f.statistic, f.threshold,
           f.statistic > f.threshold ? "something is still missing" : "what is left is noise",
-          f.where, region_table(f));
+          where_of(f), region_table(f));
     else if (!d.remaining_force.error.empty())
       r += "The missing force left with it in the model: " + d.remaining_force.error + ".\n\n";
   }
@@ -504,15 +513,14 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
         "fitted in {} evaluations with the nominal parameters held) that makes the "
         "nominal model follow the capture takes the training RMS from {:.4f} to "
         "{:.4f} mm per coordinate (likelihood ratio {:.1f}; fitting noise alone "
-        "stays below {:.1f} at α for its {} values{}). Most of it acts in the "
-        "**{}**, largest at t = {:.3g} s. ParaView: `missing-force/body-force.pvd` (force density "
-        "per "
-        "element and knot; `body-force.csv` the same as a table).\n\n"
+        "stays below {:.1f} at α for its {} values{}). {} ParaView: "
+        "`missing-force/body-force.pvd` (force density per element and knot; "
+        "`body-force.csv` the same as a table).\n\n"
         "![missing force per region](missing-force.svg)\n\n",
         f.knots, f.segments, f.evaluations, f.rms_before * 1e3, f.rms_after * 1e3, f.statistic,
         f.threshold, f.dof,
-        f.statistic > f.threshold ? "" : ": this field is noise, its place means nothing", f.where,
-        f.peak_time);
+        f.statistic > f.threshold ? "" : ": this field is noise, its place means nothing",
+        where_of(f));
     r += region_table(f);
   } else if (d.settings.missing_force.enabled && !d.missing_force.error.empty()) {
     r += "\n### Missing force\n\nNot found: " + d.missing_force.error + "\n";

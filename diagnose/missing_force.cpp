@@ -157,10 +157,17 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
       }
       mf.rms_after = after.rms / std::sqrt(3.0);
     }
+    // A field no better than none at the scenario's tolerances (its gain was the
+    // coarse stage's integration error) is not kept: the report shows none.
+    Eigen::VectorXd p = out.p;
+    if (mf.rms_after >= mf.rms_before) {
+      p = force.map().initial();
+      mf.rms_after = mf.rms_before;
+    }
     mf.statistic = noise.samples * (mf.rms_before * mf.rms_before - mf.rms_after * mf.rms_after) /
                    (noise.sigma * noise.sigma);
     FemModel& model = force.experiment(0).model();
-    force.map().apply(out.p, model);
+    force.map().apply(p, model);
     mf.files = write_body_force(model, dir);
 
     // Summaries per third of the body and per knot.
@@ -192,9 +199,11 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
       if (energy[r] > energy[top]) top = r;
       mf.regions.push_back(region);
     }
-    mf.where = names[top];
-    mf.peak_time = field.knot_time(
-        static_cast<int>(std::max_element(per_knot.begin(), per_knot.end()) - per_knot.begin()));
+    if (total > 0) {
+      mf.where = names[top];
+      mf.peak_time = field.knot_time(
+          static_cast<int>(std::max_element(per_knot.begin(), per_knot.end()) - per_knot.begin()));
+    }
     mf.ok = true;
   } catch (const Error& err) {
     mf.error = err.what();
