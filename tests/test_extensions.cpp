@@ -267,6 +267,20 @@ INSTANTIATE_TEST_SUITE_P(
                                "late"}),
     [](const auto& info) { return info.param.name; });
 
+// The screening scores a fibre from its sensitivities at the nested k = 0, where the
+// term has no stress but a derivative: adjoint, forward sensitivities and central
+// differences agree there too (with the modulus beside it, and alone).
+TEST(Extensions, AFibreAtZeroStiffnessHasItsGradientAgreeThreeWays) {
+  const fs::path dir = test::scratch("extensions-fibre-at-zero");
+  const std::string tracks = test::simulate_tracks(dir, "truth", bar(kWithFibre, kMarkers));
+  const Scenario s = observing(dir, "fit", kNominalWithFibre, tracks);
+  FitProblem both(
+      s, {linear_fit_parameter("elastic.k", -1e7, 1e7), positive_fit_parameter("elastic.mu")});
+  test::expect_gradients_agree(both);
+  FitProblem alone(s, {linear_fit_parameter("elastic.k", -1e7, 1e7)});
+  test::expect_gradients_agree(alone);
+}
+
 // A fibre fitted from its nested k = 0 with its direction free: there the angles move
 // no marker, so JᵀJ is singular in them. The Gauss–Newton scaling of the start holds
 // them (zero rows of root_inverse) and scales the rest, instead of refusing and
