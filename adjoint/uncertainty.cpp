@@ -34,6 +34,46 @@ std::string combination(const ParameterMap& map, Eigen::VectorXd dp) {
   return s;
 }
 
+/// A parameter whose conditional standard error exceeds this many units of its span
+/// (see gauss_newton_uncertainty) is held by a Gauss–Newton scaling.
+constexpr double kUnresolvedSpan = 2;
+
+/// The SVD of J's columns `cols`, each scaled to unit norm (unit columns make the rank
+/// decision independent of parameter units): J_cols diag(1/norms) = U diag(sv) Vᵀ,
+/// and the sensitivities' accuracy as a singular value.
+struct ColumnFactors {
+  Eigen::VectorXd norms, sv;
+  Eigen::MatrixXd V;
+  double threshold = 0;
+};
+
+ColumnFactors factor_columns(const Eigen::MatrixXd& J, const std::vector<int>& cols,
+                             const Eigen::VectorXd& column_norms, double rtol) {
+  const int m = static_cast<int>(cols.size());
+  ColumnFactors f;
+  f.norms.resize(m);
+  if (m == 0) return f;
+  Eigen::MatrixXd Js(J.rows(), m);
+  for (int k = 0; k < m; ++k) {
+    f.norms[k] = column_norms[cols[k]];
+    Js.col(k) = J.col(cols[k]) / f.norms[k];
+  }
+  // SVD of R (Js = QR) has the accuracy of an SVD of Js at the cost of an m × m one;
+  // forming JᵀJ would square the condition number.
+  const Eigen::MatrixXd R = Eigen::HouseholderQR<Eigen::MatrixXd>(Js)
+                                .matrixQR()
+                                .topRows(m)
+                                .triangularView<Eigen::Upper>();
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeFullV);
+  f.sv = svd.singularValues();
+  f.V = svd.matrixV();
+  // The sensitivities are accurate to about the solver's relative tolerance (more
+  // with global error growth): singular values below that are indistinguishable
+  // from zero.
+  f.threshold = std::max(100 * rtol, 1e-12) * f.sv[0];
+  return f;
+}
+
 }  // namespace
 
 GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
@@ -151,7 +191,6 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   const Eigen::VectorXd& r = sys.residual;
   u.sigma = std::sqrt(r.squaredNorm() / (N - n));
 
-  // Unit columns make the rank decision independent of parameter units (log or not).
   // A parameter that moves no marker here (a fibre's angles, a branch's relaxation
   // time while its modulus is at its nested 0) is left out of the factorisation: its
   // row of root_inverse is zero, so a scaled fit holds it until a later restart.
@@ -164,38 +203,39 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
     u.error = "no fitted parameter moves any observed marker";
     return u;
   }
-  Eigen::VectorXd norms(m);
-  Eigen::MatrixXd Js(N, m);
-  for (int k = 0; k < m; ++k) {
-    norms[k] = all_norms[moving[k]];
-    Js.col(k) = J.col(moving[k]) / norms[k];
+  // So is one the data cannot place even with every other parameter held: its
+  // conditional standard error σ̂/‖∂r/∂p_j‖ spans more than a factor e² (a log
+  // parameter) or twice its size (a plain one). V07's λ, fitted down to 0.0036 Pa
+  // beside μ at 1.4e5 Pa, moved the markers by 1e-8 of μ's effect per unit of ln λ:
+  // scaled by it, every refit's first step moved ln λ by 4.8e6 and the line search
+  // failed on refused trials.
+  const Eigen::VectorXd unit = map.units();
+  std::vector<int> resolved;
+  for (int j : moving) {
+    const double span = map.is_log(j) ? 1.0 : std::max(std::abs(p[j]), unit[j]);
+    (u.sigma <= kUnresolvedSpan * span * all_norms[j] ? resolved : u.unresolved).push_back(j);
   }
-  // SVD of R (Js = QR) has the accuracy of an SVD of Js at the cost of an m × m one;
-  // forming JᵀJ would square the condition number.
-  const Eigen::MatrixXd R = Eigen::HouseholderQR<Eigen::MatrixXd>(Js)
-                                .matrixQR()
-                                .topRows(m)
-                                .triangularView<Eigen::Upper>();
-  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeFullV);
-  const Eigen::VectorXd sv = svd.singularValues();
-  // The sensitivities are accurate to about the solver's relative tolerance (more
-  // with global error growth): singular values below that are indistinguishable
-  // from zero.
-  const double threshold = std::max(100 * rtol, 1e-12) * sv[0];
+  const ColumnFactors all = factor_columns(J, moving, all_norms, rtol);
+  const ColumnFactors& scaling =
+      resolved.size() == moving.size() ? all : factor_columns(J, resolved, all_norms, rtol);
   // A square root of (JᵀJ)⁻¹ whose unresolved directions are held at the threshold:
   // what a Gauss–Newton scaling of the fit needs even where the covariance is refused.
-  const Eigen::MatrixXd root = norms.cwiseInverse().asDiagonal() * svd.matrixV() *
-                               sv.cwiseMax(threshold).cwiseInverse().asDiagonal();
+  const Eigen::MatrixXd root = scaling.norms.cwiseInverse().asDiagonal() * scaling.V *
+                               scaling.sv.cwiseMax(scaling.threshold).cwiseInverse().asDiagonal();
   u.root_inverse = Eigen::MatrixXd::Zero(n, n);
-  for (int k = 0; k < m; ++k) u.root_inverse.row(moving[k]).head(m) = root.row(k);
+  for (std::size_t k = 0; k < resolved.size(); ++k)
+    u.root_inverse.row(resolved[k]).head(root.cols()) = root.row(static_cast<long>(k));
   if (!still.empty()) {
     u.error = fmt::format(
         "{} does not move any observed marker: it is not identifiable from these observations",
         parameter_name(map, still[0]));
     return u;
   }
+  const Eigen::VectorXd& sv = all.sv;
+  const Eigen::VectorXd& norms = all.norms;
+  const double threshold = all.threshold;
   if (!(sv[n - 1] > threshold)) {
-    const Eigen::VectorXd dp = norms.cwiseInverse().asDiagonal() * svd.matrixV().col(n - 1);
+    const Eigen::VectorXd dp = norms.cwiseInverse().asDiagonal() * all.V.col(n - 1);
     u.error = fmt::format(
         "JᵀJ is singular: the parameter combination {} is not identifiable from the observed "
         "markers (relative singular value {:.2g}, below the sensitivities' accuracy {:.2g} at "
@@ -204,7 +244,7 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
     return u;
   }
   const Eigen::MatrixXd W =
-      norms.cwiseInverse().asDiagonal() * svd.matrixV() * sv.cwiseInverse().asDiagonal();
+      norms.cwiseInverse().asDiagonal() * all.V * sv.cwiseInverse().asDiagonal();
   u.covariance = u.sigma * u.sigma * W * W.transpose();
   u.std_error_p = u.covariance.diagonal().cwiseSqrt();
   u.std_error.resize(n);

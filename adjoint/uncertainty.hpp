@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <atomic>
 #include <string>
+#include <vector>
 
 #include "adjoint/fit_problem.hpp"
 
@@ -21,8 +22,13 @@ struct ParameterUncertainty {
   Eigen::VectorXd std_error;    // model units (q·σ_p for log entries)
   /// B with B Bᵀ = (JᵀJ)⁻¹ in optimiser space, singular values below the
   /// sensitivities' accuracy raised to it: set whenever J was computed, also when the
-  /// covariance is refused as singular (ok false).
+  /// covariance is refused as singular (ok false). Zero rows for the parameters that
+  /// move no marker and for the unresolved ones, whose J columns are left out.
   Eigen::MatrixXd root_inverse;
+  /// Parameters that move markers, but too little for the data to place them even
+  /// with all others held (see gauss_newton_uncertainty): moving one across its
+  /// span changes ‖r‖² by less than σ̂².
+  std::vector<int> unresolved;
 };
 
 /// Standard errors computed once at a point and reused there: the fit's Gauss–Newton

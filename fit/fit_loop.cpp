@@ -170,6 +170,16 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
           "{}: going on in Gauss–Newton-scaled parameters (JᵀJ from one sensitivity solve)", why));
     return true;
   };
+  // A scaled run whose line search failed without a move (every trial refused or
+  // failed) goes on in p: the scaling itself may be what sent the trials astray.
+  const auto drop_gauss_newton_scaling = [&] {
+    c.basis.resize(0, 0);
+    opt.set_lower_bounds(std::vector<double>(xlo.data(), xlo.data() + n));
+    opt.set_upper_bounds(std::vector<double>(xhi.data(), xhi.data() + n));
+    if (options.on_progress)
+      options.on_progress(
+          "the Gauss–Newton-scaled line search failed without a move; going on unscaled");
+  };
   for (int restart = 0;;) {
     double best_before = c.outcome.best.objective;
     c.remeasured = NAN;
@@ -314,7 +324,11 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
         }
         if (!gave_up || left <= 0 || restart >= kMaxRestarts || c.outcome.best.evaluation == 0)
           break;
-        if (!gauss_newton_restart() && !improved) break;
+        if (c.basis.size() && !(c.outcome.best.objective < best_before)) {
+          drop_gauss_newton_scaling();
+        } else if (!gauss_newton_restart() && !improved) {
+          break;
+        }
       }
     }
     // Coarse stages never precondition, so a new stage always restarts in p.

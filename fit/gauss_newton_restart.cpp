@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 
 #include "adjoint/uncertainty.hpp"
@@ -34,7 +35,8 @@ bool gauss_newton_model(const ParameterUncertainty& u, double phi, int n, Eigen:
 /// first step (length ½ along −∇_z, see objective_scale) the Gauss–Newton step
 /// −(1/κ)(JᵀJ)⁻¹∇Φ, κ = 2Φ / ‖r‖² relating Φ's time integral to the sum over
 /// frames. False when JᵀJ is unavailable (too many parameters). A parameter that
-/// moves no marker at the best point keeps its value until the next restart.
+/// moves no marker at the best point, or too little for the data to place it
+/// (ParameterUncertainty::unresolved), keeps its value until the next restart.
 bool precondition(Context& c, const Eigen::VectorXd& best, const Eigen::VectorXd& gradient) {
   UncertaintyAtPoint& cache = c.outcome.uncertainty;
   if (!cache.holds(best)) {
@@ -62,9 +64,14 @@ double predicted_gain(const Context& c, const Eigen::VectorXd& gradient) {
   if (cache.p.size() != gradient.size() || !c.terms.empty() ||
       !gauss_newton_model(cache.value, phi, static_cast<int>(gradient.size()), L, beta))
     return NAN;
-  // A parameter held by the scaling (it moved no marker where JᵀJ was computed) is
-  // outside the model: it predicts nothing about what moving it would gain.
-  if ((L.rowwise().squaredNorm().array() == 0).any()) return NAN;
+  // A parameter held by the scaling because it moved no marker where JᵀJ was computed
+  // is outside the model: it predicts nothing about what moving it would gain. An
+  // unresolved one is inside it: across its span it gains less than σ̂².
+  const Eigen::VectorXd rows = L.rowwise().squaredNorm();
+  for (int j = 0; j < rows.size(); ++j)
+    if (rows[j] == 0 && std::find(cache.value.unresolved.begin(), cache.value.unresolved.end(),
+                                  j) == cache.value.unresolved.end())
+      return NAN;
   // The decrease to the Gauss–Newton model's minimum, ½ gᵀ(−Δp_GN) = ½ β |Lᵀg|², over Φ.
   const double gain = 0.5 * beta * (L.transpose() * gradient).squaredNorm();
   return std::isfinite(gain) ? gain / phi : NAN;

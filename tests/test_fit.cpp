@@ -396,6 +396,37 @@ TEST(Fit, AGaussNewtonStepThatPredictsAGainWithinTheAccuracyEndsTheFit) {
   }
 }
 
+// A Lamé λ fitted far below μ (V07's nominal fit drove it to 0.0036 Pa beside μ at
+// 1.4e5 Pa) moves the markers too little for the data to place it. The Gauss–Newton
+// scaling holds it rather than scaling it by its vanishing sensitivity (every V07
+// refit's first scaled step moved ln λ by 4.8e6 and ended on refused trials after
+// one evaluation), and μ and ν still come back from 10 % off.
+TEST(Fit, AParameterTheDataCannotPlaceIsHeldByTheGaussNewtonScaling) {
+  const path dir = test::scratch("fit-unresolved");
+  const std::string truth = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 0.01, mu: 3.0e5 }
+  viscous: { model: power-law, nu: 20, h: 0.8 })";
+  const std::string start = R"(
+  density: 1100
+  elastic: { model: neo-hookean, lambda: 0.01, mu: 2.7e5 }
+  viscous: { model: power-law, nu: 22, h: 0.8 })";
+  const std::string tracks = perturb_tracks(test::simulate_tracks(dir, "truth", bar(truth)),
+                                            dir / "noisy.csv", 1e-4, 0.0, 1, 5);
+  const Fitted f = fit(dir, tracks, start, kFitSection, 1, 1e-7, true);
+  const ParameterUncertainty u = gauss_newton_uncertainty(*f.problem, f.problem->map().initial());
+  ASSERT_EQ(u.unresolved, std::vector<int>{0}) << u.error;
+  EXPECT_EQ(u.root_inverse.row(0).norm(), 0);
+  EXPECT_GT(u.root_inverse.row(1).norm(), 0);
+  // Its standard error is still reported, and says the same: ln λ is unknown.
+  ASSERT_TRUE(u.ok) << u.error;
+  EXPECT_GT(u.std_error_p[0], 2);
+  EXPECT_NEAR(f.q[1] / 3.0e5, 1.0, 1e-3)
+      << f.outcome.stop_reason << " after " << f.outcome.evaluations;
+  EXPECT_NEAR(f.q[2] / 20, 1.0, 1e-2) << f.outcome.stop_reason;
+  EXPECT_EQ(f.outcome.stop_reason.rfind("converged", 0), 0u) << f.outcome.stop_reason;
+}
+
 }  // namespace
 }  // namespace kelvin
 
