@@ -100,6 +100,14 @@ std::vector<CandidateScore> score_candidates(
   const int nt = static_cast<int>(fitted.size());
   const Projector project(J, fitted);
   const Eigen::VectorXd Pr = project(r);
+  // The fitted entries a step moves, and their least-squares solver. A held entry's
+  // unit column is a direction like any other, and dividing its coefficient by its
+  // vanishing norm made V07's linearised starts move ln λ by millions.
+  std::vector<int> moved;
+  for (int j : fitted)
+    if (std::find(options.held.begin(), options.held.end(), j) == options.held.end())
+      moved.push_back(j);
+  const Projector move(J, moved);
   const double sigma2 = options.noise_variance > 0
                             ? options.noise_variance
                             : r.squaredNorm() / static_cast<double>(std::max<long>(1, N - nt));
@@ -147,8 +155,12 @@ std::vector<CandidateScore> score_candidates(
         // The fitted parameters move with it: J_θ Δθ ≈ −(r + J_φ Δφ).
         Eigen::VectorXd rhs = -r;
         for (int k = 0; k < s.dof; ++k) rhs -= J.col(s.active[k]) * s.step[k];
-        s.fitted_step = project.solve(rhs);
-        for (int k = 0; k < nt; ++k) s.fitted_step[k] /= J.col(fitted[k]).norm();
+        const Eigen::VectorXd x = move.solve(rhs);
+        s.fitted_step = Eigen::VectorXd::Zero(nt);
+        for (std::size_t k = 0, m = 0; k < fitted.size(); ++k)
+          if (m < moved.size() && moved[m] == fitted[k])
+            s.fitted_step[static_cast<long>(k)] =
+                x[static_cast<long>(m++)] / J.col(fitted[k]).norm();
         break;
       }
       s.active.erase(s.active.begin() + worst);

@@ -34,6 +34,9 @@ struct ScreeningOptions {
   /// Entries of p at a lower bound (a nested modulus at 0): a step that would lower
   /// one is not taken; the candidate is scored on the others (an active set).
   std::vector<int> nonnegative;
+  /// Fitted entries the step keeps where they are (the data cannot place them, see
+  /// unresolved_entries): their directions are still projected out of the score.
+  std::vector<int> held;
 };
 
 /// Scores of `candidates` (named groups of entries of p) given the entries of p

@@ -35,7 +35,7 @@ std::string combination(const ParameterMap& map, Eigen::VectorXd dp) {
 }
 
 /// A parameter whose conditional standard error exceeds this many units of its span
-/// (see gauss_newton_uncertainty) is held by a Gauss–Newton scaling.
+/// is unresolved (see unresolved_entries).
 constexpr double kUnresolvedSpan = 2;
 
 /// The SVD of J's columns `cols`, each scaled to unit norm (unit columns make the rank
@@ -154,6 +154,18 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
   return g;
 }
 
+std::vector<int> unresolved_entries(const ParameterMap& map, const Eigen::VectorXd& p,
+                                    const Eigen::MatrixXd& J, double sigma,
+                                    const std::vector<int>& entries) {
+  const Eigen::VectorXd unit = map.units();
+  std::vector<int> out;
+  for (int j : entries) {
+    const double span = map.is_log(j) ? 1.0 : std::max(std::abs(p[j]), unit[j]);
+    if (sigma > kUnresolvedSpan * span * J.col(j).norm()) out.push_back(j);
+  }
+  return out;
+}
+
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt) {
   ParameterUncertainty u;
@@ -203,18 +215,15 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
     u.error = "no fitted parameter moves any observed marker";
     return u;
   }
-  // So is one the data cannot place even with every other parameter held: its
-  // conditional standard error σ̂/‖∂r/∂p_j‖ spans more than a factor e² (a log
-  // parameter) or twice its size (a plain one). V07's λ, fitted down to 0.0036 Pa
-  // beside μ at 1.4e5 Pa, moved the markers by 1e-8 of μ's effect per unit of ln λ:
-  // scaled by it, every refit's first step moved ln λ by 4.8e6 and the line search
-  // failed on refused trials.
-  const Eigen::VectorXd unit = map.units();
+  // So is one the data cannot place (unresolved_entries). V07's λ, fitted down to
+  // 0.0036 Pa beside μ at 1.4e5 Pa, moved the markers by 1e-8 of μ's effect per unit
+  // of ln λ: scaled by it, every refit's first step moved ln λ by 4.8e6 and the line
+  // search failed on refused trials.
+  u.unresolved = unresolved_entries(map, p, J, u.sigma, moving);
   std::vector<int> resolved;
-  for (int j : moving) {
-    const double span = map.is_log(j) ? 1.0 : std::max(std::abs(p[j]), unit[j]);
-    (u.sigma <= kUnresolvedSpan * span * all_norms[j] ? resolved : u.unresolved).push_back(j);
-  }
+  for (int j : moving)
+    if (std::find(u.unresolved.begin(), u.unresolved.end(), j) == u.unresolved.end())
+      resolved.push_back(j);
   const ColumnFactors all = factor_columns(J, moving, all_norms, rtol);
   const ColumnFactors& scaling =
       resolved.size() == moving.size() ? all : factor_columns(J, resolved, all_norms, rtol);

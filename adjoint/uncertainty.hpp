@@ -25,9 +25,8 @@ struct ParameterUncertainty {
   /// covariance is refused as singular (ok false). Zero rows for the parameters that
   /// move no marker and for the unresolved ones, whose J columns are left out.
   Eigen::MatrixXd root_inverse;
-  /// Parameters that move markers, but too little for the data to place them even
-  /// with all others held (see gauss_newton_uncertainty): moving one across its
-  /// span changes ‖r‖² by less than σ̂².
+  /// Parameters that move markers, but too little for the data to place them (see
+  /// unresolved_entries, at σ̂).
   std::vector<int> unresolved;
 };
 
@@ -71,6 +70,15 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
                                       const std::atomic<bool>* interrupt = nullptr,
                                       bool with_jacobian = true,
                                       const std::vector<int>* sensitivity_entries = nullptr);
+
+/// The entries of p among `entries` that move markers (r, J as gauss_newton_system
+/// gives them, σ the noise level) too little for the data to place them even with
+/// every other entry held: σ/‖∂r/∂p_j‖, the conditional standard error, spans more
+/// than a factor e² (a log entry) or twice max(|p_j|, its unit) (a plain one).
+/// Moving one across that span changes ‖r‖² by less than σ².
+std::vector<int> unresolved_entries(const ParameterMap& map, const Eigen::VectorXd& p,
+                                    const Eigen::MatrixXd& jacobian, double sigma,
+                                    const std::vector<int>& entries);
 
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);

@@ -509,6 +509,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   std::vector<std::pair<std::string, std::vector<int>>> groups;
   ScreeningOptions so;
   so.noise_variance = d.noise.sigma * d.noise.sigma;
+  so.held = unresolved_entries(smap, p_screen, g.jacobian, d.noise.sigma, range(n_nominal));
+  for (int j : so.held)
+    say(
+        fmt::format("  {} moves the markers too little for the data to place it: the "
+                    "linearised starts of the refits keep it at its nominal value",
+                    smap.label(j)));
   const Eigen::VectorXd lo = smap.lower(), start = smap.initial();
   for (std::size_t c = 0; c < all.size(); ++c) {
     const std::vector<int> e = entries_of(screen, screen.extended.candidate_specs[c]);
@@ -1010,6 +1016,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         std::vector<std::pair<std::string, std::vector<int>>> groups2;
         ScreeningOptions so2;
         so2.noise_variance = sigma2;
+        so2.held = unresolved_entries(amap, p2, g2.jacobian, std::sqrt(sigma2), range(n_fixed));
         const Eigen::VectorXd lo2 = amap.lower(), start2 = amap.initial();
         for (std::size_t k = 0; k < others.size(); ++k) {
           const std::vector<int> e = entries_of(again, again.extended.candidate_specs[k + 1]);

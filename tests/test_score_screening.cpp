@@ -116,6 +116,37 @@ TEST(ScoreScreening, BoundedEntriesTakeNoStepBelowTheirBound) {
   EXPECT_LT(free[0].step[0], 0);
 }
 
+// A fitted entry whose column is a thousand-millionth of the others' (V07's λ fitted
+// to 0.0036 Pa beside μ at 1.4e5 Pa): its unit column is a direction like any other,
+// and the step divided its coefficient by the vanishing norm. Held, it stays put,
+// the others' step is the least-squares one without it, and the score is unchanged.
+TEST(ScoreScreening, AHeldFittedEntryTakesNoStep) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0, 0.1);
+  const int N = 300;
+  Eigen::MatrixXd J(N, 3);
+  Eigen::VectorXd y(N);
+  for (int i = 0; i < N; ++i) {
+    const double t = i / double(N);
+    J.row(i) << 1, 1e-9 * t * t, std::sin(7 * t);
+    y[i] = 2 + 0.4 * std::sin(7 * t) + noise(rng);
+  }
+  const Eigen::VectorXd theta = J.leftCols(2).colPivHouseholderQr().solve(y);
+  const Eigen::VectorXd r = J.leftCols(2) * theta - y;
+  const auto loose = score_candidates(r, J, {0, 1}, {{"sine", {2}}});
+  ASSERT_EQ(loose[0].fitted_step.size(), 2);
+  EXPECT_GT(std::abs(loose[0].fitted_step[1]), 1e6);
+  ScreeningOptions o;
+  o.held = {1};
+  const auto held = score_candidates(r, J, {0, 1}, {{"sine", {2}}}, o);
+  ASSERT_EQ(held[0].fitted_step.size(), 2);
+  EXPECT_EQ(held[0].fitted_step[1], 0);
+  ASSERT_EQ(held[0].step.size(), 1);
+  const Eigen::VectorXd rest = -(r + J.col(2) * held[0].step[0]);
+  EXPECT_NEAR(held[0].fitted_step[0], J.col(0).dot(rest) / J.col(0).squaredNorm(), 1e-12);
+  EXPECT_EQ(held[0].statistic, loose[0].statistic);
+}
+
 TEST(ScoreScreening, ConfoundingIsTheCanonicalCorrelation) {
   const int N = 500;
   Eigen::MatrixXd J(N, 4);
