@@ -754,6 +754,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       }
       p = nominal_p + 0.5 * (p - nominal_p);
     }
+    if (stopped()) return nominal_p;
     say(
         fmt::format("  {}: the linearised start and its halvings are worse than the nominal; "
                     "starting at the nominal",

@@ -4,6 +4,7 @@
 // without one (none).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <fstream>
 #include <random>
@@ -372,14 +373,16 @@ fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned 
   return dir / "train.yaml";
 }
 
-TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
-  const fs::path dir = test::scratch("diagnosis-drag");
-  const std::string truth = R"(  density: 1100
+// The truth of the drag tests: the nominal bar in air that drags it (−cρv).
+const std::string kWithDrag = R"(  density: 1100
   elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
   viscous:
     - { model: newtonian, nu: 20 }
     - { model: drag, c: 40 })";
-  const fs::path scenario = diagnosis_case(dir, truth, 7);
+
+TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
+  const fs::path dir = test::scratch("diagnosis-drag");
+  const fs::path scenario = diagnosis_case(dir, kWithDrag, 7);
   DiagnoseOptions o;
   const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), o);
   write_diagnosis_outputs(d);
@@ -420,6 +423,41 @@ TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
   const Scenario fitted = load_scenario((dir / "out" / "fitted.yaml").string());
   ASSERT_EQ(fitted.material.viscous.size(), 2u);
   EXPECT_EQ(fitted.material.viscous[1].model, "drag");
+}
+
+// Interrupted in its first refit, a diagnosis keeps the nominal fit and nothing of
+// the refit it stopped; --resume reuses the first, redoes the second, and comes to
+// the verdict an uninterrupted run gives.
+TEST(Diagnosis, AnInterruptedDiagnosisResumesWhereItStopped) {
+  const fs::path dir = test::scratch("diagnosis-resume");
+  const fs::path scenario = diagnosis_case(dir, kWithDrag, 7, "drag, sync_lag");
+  std::atomic<bool> interrupt{false};
+  std::string first, second;
+  DiagnoseOptions o;
+  o.interrupt = &interrupt;
+  o.progress = [&](const std::string& line) {
+    first += line + "\n";
+    if (line.find("drag: eval") != std::string::npos) interrupt = true;
+  };
+  const Diagnosis a = run_diagnosis(scenario.string(), (dir / "out").string(), o);
+  EXPECT_TRUE(a.interrupted);
+  EXPECT_NE(first.find("drag: eval"), std::string::npos) << first;
+  EXPECT_TRUE(fs::exists(dir / "out" / "state" / "nominal.csv"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "state" / "drag.csv"));
+
+  interrupt = false;
+  o.resume = true;
+  o.progress = [&](const std::string& line) { second += line + "\n"; };
+  const Diagnosis b = run_diagnosis(scenario.string(), (dir / "out").string(), o);
+  EXPECT_NE(second.find("nominal: resumed from"), std::string::npos) << second;
+  EXPECT_EQ(second.find("drag: resumed from"), std::string::npos) << second;
+  EXPECT_EQ(b.nominal_parameters.size(), a.nominal_parameters.size());
+  for (std::size_t j = 0; j < a.nominal_parameters.size() && j < b.nominal_parameters.size(); ++j)
+    EXPECT_EQ(b.nominal_parameters[j].value, a.nominal_parameters[j].value);
+  EXPECT_EQ(b.effect, "drag") << second;
+  ASSERT_GE(b.accepted, 0);
+  ASSERT_EQ(b.refits[b.accepted].parameters.size(), 1u);
+  EXPECT_NEAR(b.refits[b.accepted].parameters[0].value, 40, 4);
 }
 
 // A relaxing branch in the data (the standard linear solid) is told from the other
