@@ -170,8 +170,11 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
           "{}: going on in Gauss–Newton-scaled parameters (JᵀJ from one sensitivity solve)", why));
     return true;
   };
-  // A scaled run whose line search failed without a move (every trial refused or
-  // failed) goes on in p: the scaling itself may be what sent the trials astray.
+  // A scaled run from the start point whose line search failed without a move
+  // (every trial refused or failed) goes on in p: the scaling itself may be what
+  // sent the trials astray. Later, a restart that gains nothing ends the fit as
+  // before (V07's clamp-compliance refit, unscaled after its second scaled restart
+  // failed, spent 8 evaluations on 0.1 % of rms).
   const auto drop_gauss_newton_scaling = [&] {
     c.basis.resize(0, 0);
     opt.set_lower_bounds(std::vector<double>(xlo.data(), xlo.data() + n));
@@ -324,7 +327,8 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
         }
         if (!gave_up || left <= 0 || restart >= kMaxRestarts || c.outcome.best.evaluation == 0)
           break;
-        if (c.basis.size() && !(c.outcome.best.objective < best_before)) {
+        if (c.basis.size() && !(c.outcome.best.objective < best_before) &&
+            c.outcome.best.iteration == options.first_iteration) {
           drop_gauss_newton_scaling();
         } else if (!gauss_newton_restart() && !improved) {
           break;
