@@ -34,10 +34,6 @@ std::string combination(const ParameterMap& map, Eigen::VectorXd dp) {
   return s;
 }
 
-/// A parameter whose conditional standard error exceeds this many units of its span
-/// is unresolved (see unresolved_entries).
-constexpr double kUnresolvedSpan = 2;
-
 /// The SVD of J's columns `cols`, each scaled to unit norm (unit columns make the rank
 /// decision independent of parameter units): J_cols diag(1/norms) = U diag(sv) Vᵀ,
 /// and the sensitivities' accuracy as a singular value.
@@ -154,15 +150,16 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
   return g;
 }
 
+double parameter_span(const ParameterMap& map, const Eigen::VectorXd& p, int j) {
+  return map.is_log(j) ? 1.0 : std::max(std::abs(p[j]), map.units()[j]);
+}
+
 std::vector<int> unresolved_entries(const ParameterMap& map, const Eigen::VectorXd& p,
                                     const Eigen::MatrixXd& J, double sigma,
                                     const std::vector<int>& entries) {
-  const Eigen::VectorXd unit = map.units();
   std::vector<int> out;
-  for (int j : entries) {
-    const double span = map.is_log(j) ? 1.0 : std::max(std::abs(p[j]), unit[j]);
-    if (sigma > kUnresolvedSpan * span * J.col(j).norm()) out.push_back(j);
-  }
+  for (int j : entries)
+    if (sigma > kUnresolvedSpan * parameter_span(map, p, j) * J.col(j).norm()) out.push_back(j);
   return out;
 }
 

@@ -71,6 +71,14 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
                                       bool with_jacobian = true,
                                       const std::vector<int>* sensitivity_entries = nullptr);
 
+/// How far a parameter's value is taken to range when judging whether the data place
+/// it: a factor e (log entries, whose p is ln q) or max(|p_j|, its unit) (plain ones).
+double parameter_span(const ParameterMap& map, const Eigen::VectorXd& p, int j);
+
+/// A parameter is unresolved when its conditional standard error exceeds this many
+/// spans (see unresolved_entries).
+constexpr double kUnresolvedSpan = 2;
+
 /// The entries of p among `entries` that move markers (r, J as gauss_newton_system
 /// gives them, σ the noise level) too little for the data to place them even with
 /// every other entry held: σ/‖∂r/∂p_j‖, the conditional standard error, spans more

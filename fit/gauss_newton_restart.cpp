@@ -66,14 +66,18 @@ double predicted_gain(const Context& c, const Eigen::VectorXd& gradient) {
     return NAN;
   // A parameter held by the scaling because it moved no marker where JᵀJ was computed
   // is outside the model: it predicts nothing about what moving it would gain. An
-  // unresolved one is inside it: across its span it gains less than σ̂².
+  // unresolved one (held too) is bounded by its slope across the range the data
+  // leave it, kUnresolvedSpan spans: a steep slope there keeps the fit going.
   const Eigen::VectorXd rows = L.rowwise().squaredNorm();
-  for (int j = 0; j < rows.size(); ++j)
-    if (rows[j] == 0 && std::find(cache.value.unresolved.begin(), cache.value.unresolved.end(),
-                                  j) == cache.value.unresolved.end())
-      return NAN;
+  const std::vector<int>& unresolved = cache.value.unresolved;
+  double held = 0;
+  for (int j = 0; j < rows.size(); ++j) {
+    if (rows[j] != 0) continue;
+    if (std::find(unresolved.begin(), unresolved.end(), j) == unresolved.end()) return NAN;
+    held += std::abs(gradient[j]) * kUnresolvedSpan * parameter_span(c.problem.map(), cache.p, j);
+  }
   // The decrease to the Gauss–Newton model's minimum, ½ gᵀ(−Δp_GN) = ½ β |Lᵀg|², over Φ.
-  const double gain = 0.5 * beta * (L.transpose() * gradient).squaredNorm();
+  const double gain = 0.5 * beta * (L.transpose() * gradient).squaredNorm() + held;
   return std::isfinite(gain) ? gain / phi : NAN;
 }
 
