@@ -14,6 +14,9 @@
 
 namespace kelvin {
 
+class ByteWriter;
+class ByteReader;
+
 class EvaluationPlan {
  public:
   /// Simulated seconds per segment, the same for every evaluation: boundaries
@@ -57,6 +60,9 @@ class EvaluationPlan {
   void note_adjoint_peaks(const AdjointPeaks& per_rms) { adjoint_peaks_ = per_rms; }
 
  private:
+  // Packed whole for the ranks that do not own the experiment (result_exchange.hpp).
+  friend void put(ByteWriter&, const EvaluationPlan&);
+  friend void get(ByteReader&, EvaluationPlan&);
   double segment_ = -1;       // automatic segment length; < 0 until planned
   double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
   long planned_steps_ = 0;

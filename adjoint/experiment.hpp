@@ -62,6 +62,8 @@ inline long default_checkpoint_steps(int state_size) {
   return std::max((512L << 20) / per_point, 200L);
 }
 
+/// Ranks that did not run the experiment receive it packed (result_exchange.cpp packs
+/// every field: a new one goes there too).
 struct ExperimentResult {
   bool ok = false;
   std::string error;  // why the simulation failed (names the time)

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <filesystem>
 
+#include "adjoint/result_exchange.hpp"
 #include "base/error.hpp"
 #include "materials/material.hpp"
 #include "probing/probe_experiment.hpp"
@@ -27,7 +28,9 @@ std::vector<FitParameterSpec> default_fit_parameters(const Scenario& s) {
   return out;
 }
 
-FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs) {
+FitProblem::FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs,
+                       Communicator& comm)
+    : comm_(&comm) {
   if (specs.empty()) specs = default_fit_parameters(scenario);
   scenario_ = &scenario;
   // A scenario of static measurements alone is fitted to them; one with captured
@@ -159,15 +162,76 @@ void FitProblem::weigh_static_terms(const Scenario& main) {
     if (!(st->weight() > 0)) st->set_weight(fallback);
 }
 
+namespace {
+
+/// What rank `from` sends after its share of an evaluation: whether it was
+/// interrupted, the message of an exception it met, and the result and plan of each
+/// experiment it owns.
+std::string pack_share(const FitProblem& problem, const std::vector<ExperimentResult>& results,
+                       const std::vector<EvaluationPlan>& plans, bool interrupted,
+                       const std::string& thrown) {
+  ByteWriter out;
+  out.put(interrupted);
+  out.put(thrown);
+  for (size_t i = 0; i < results.size(); ++i)
+    if (problem.owns(static_cast<int>(i))) {
+      put(out, results[i]);
+      put(out, plans[i]);
+    }
+  return out.bytes();
+}
+
+}  // namespace
+
 Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   Evaluation ev;
   ev.ok = true;
+  std::vector<ExperimentResult> results(experiments_.size());
+  std::exception_ptr thrown;
+  try {
+    for (size_t i = 0; i < experiments_.size(); ++i)
+      if (owns(static_cast<int>(i)))
+        results[i] = experiments_[i]->evaluate(*map_, p, options, plans_[i]);
+  } catch (...) {
+    thrown = std::current_exception();
+  }
+  ev.interrupted = options.interrupt && options.interrupt->load();
+  if (comm_->size() > 1) {
+    std::string message;
+    if (thrown) try {
+        std::rethrow_exception(thrown);
+      } catch (const std::exception& e) {
+        message = e.what();
+      } catch (...) {
+        message = "an unknown exception";
+      }
+    const std::vector<std::string> shares =
+        comm_->all_gather(pack_share(*this, results, plans_, ev.interrupted, message));
+    std::string first_thrown;
+    for (int r = 0; r < comm_->size(); ++r) {
+      ByteReader in(shares[r]);
+      bool interrupted = false;
+      std::string m;
+      in.get(interrupted);
+      in.get(m);
+      ev.interrupted = ev.interrupted || interrupted;
+      if (first_thrown.empty()) first_thrown = m;
+      for (size_t i = r; i < experiments_.size(); i += comm_->size()) {
+        get(in, results[i]);
+        get(in, plans_[i]);
+      }
+    }
+    if (ev.interrupted && !(options.interrupt && options.interrupt->load())) comm_->interrupt();
+    if (!first_thrown.empty()) throw Error(first_thrown);
+  } else if (thrown) {
+    std::rethrow_exception(thrown);
+  }
   double weighted_time = 0;
   if (options.method != GradientMethod::kNone) ev.gradient.setZero(map_->size());
   for (size_t i = 0; i < experiments_.size(); ++i) {
     const auto& ex = experiments_[i];
-    ExperimentResult r = ex->evaluate(*map_, p, options, plans_[i]);
+    ExperimentResult& r = results[i];
     if (!r.ok && ev.ok) {
       ev.ok = false;
       // Name the experiment unless the message already does (static-state errors).

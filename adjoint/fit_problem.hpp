@@ -13,6 +13,7 @@
 #include "adjoint/experiment.hpp"
 #include "adjoint/parameter_map.hpp"
 #include "adjoint/static_term.hpp"
+#include "base/communicator.hpp"
 #include "yaml/scenario.hpp"
 
 namespace kelvin {
@@ -33,6 +34,10 @@ struct Evaluation {
   std::vector<ExperimentResult> experiments;
   std::vector<StaticTermResult> statics;  // per static measurement
   double seconds = 0;
+  /// Whether the run was interrupted by the end of this evaluation, on any rank: the
+  /// value every rank acts on (a signal that lands on one rank later must not send
+  /// it down another path).
+  bool interrupted = false;
 };
 
 class FitProblem {
@@ -42,8 +47,10 @@ class FitProblem {
   /// Static measurements come from a `probing:` section of the scenario or of its
   /// experiments; a scenario without tracks is then fitted to them alone.
   /// The scenario must outlive the problem (a temporary would not).
-  FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs = {});
-  FitProblem(Scenario&&, std::vector<FitParameterSpec> = {}) = delete;
+  /// Experiment i is simulated on rank i mod comm.size() (FitProblem::evaluate).
+  FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs = {},
+             Communicator& comm = world());
+  FitProblem(Scenario&&, std::vector<FitParameterSpec> = {}, Communicator& = world()) = delete;
   ~FitProblem();
 
   const ParameterMap& map() const { return *map_; }
@@ -61,9 +68,21 @@ class FitProblem {
   int num_static_terms() const { return static_cast<int>(statics_.size()); }
   StaticTerm& static_term(int i) { return *statics_[i]; }
 
+  /// Φ and, on request, dΦ/dp at p. Collective over the communicator: each rank
+  /// simulates the experiments it owns, and every rank receives every result and
+  /// plan, so that all hold what a serial evaluation would, to the bit (sums in
+  /// experiment order). A failure on one rank is a failed evaluation on all; an
+  /// exception on one is thrown on all. Static terms are evaluated on every rank.
   Evaluation evaluate(const Eigen::VectorXd& p, const GradientOptions& options);
 
+  Communicator& communicator() const { return *comm_; }
+  /// Evaluates on this rank alone from now on (rank 0 writing the outputs while
+  /// the others have finished): the plans it holds are every experiment's.
+  void evaluate_alone() { comm_ = &serial_communicator(); }
+  bool owns(int experiment) const { return experiment % comm_->size() == comm_->rank(); }
+
  private:
+  Communicator* comm_;
   const Scenario* scenario_ = nullptr;
   std::vector<std::unique_ptr<Scenario>> owned_;  // experiments loaded here
   std::vector<std::unique_ptr<Experiment>> experiments_;

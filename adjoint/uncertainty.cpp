@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "adjoint/marker_trajectory.hpp"
+#include "adjoint/result_exchange.hpp"
 
 namespace kelvin {
 namespace {
@@ -70,6 +71,97 @@ ColumnFactors factor_columns(const Eigen::MatrixXd& J, const std::vector<int>& c
   return f;
 }
 
+/// One experiment's share of the Gauss–Newton system (gauss_newton_system).
+struct ExperimentRows {
+  std::string error;
+  double rtol = 0;
+  std::vector<double> residual;
+  std::vector<Eigen::RowVectorXd> rows;
+  std::vector<ResidualSample> samples;
+};
+
+ExperimentRows experiment_rows(FitProblem& problem, int e, const Eigen::VectorXd& p,
+                               const std::atomic<bool>* interrupt, bool with_jacobian,
+                               const std::vector<int>* sensitivity_entries) {
+  ExperimentRows b;
+  Experiment& ex = problem.experiment(e);
+  const Scenario& s = ex.scenario();
+  const MarkerObjective& objective = ex.objective();
+  b.rtol = s.solver.rtol;
+  const MarkerTracks& obs = s.markers.observed;
+  // Runs start at t = 0 (static or rest); frames before that cannot be simulated.
+  const double begin = std::max(0.0, objective.window_begin());
+  const double end = objective.window_end();
+  std::vector<double> times;
+  for (double t : obs.times)
+    if (t >= begin && t <= end) times.push_back(t);
+  if (times.empty()) return b;
+  const MarkerTrajectory traj =
+      simulate_markers(problem, e, p, times, with_jacobian, interrupt, sensitivity_entries);
+  if (!traj.ok) {
+    b.error = fmt::format("{}: {}", s.path, traj.error);
+    return b;
+  }
+  for (size_t f = 0; f < times.size(); ++f)
+    for (int i = 0; i < objective.num_markers(); ++i) {
+      const double w = objective.weight(i);
+      if (!(w > 0)) continue;
+      for (int c = 0; c < 3; ++c) {
+        // Coordinates, not markers, are the samples: a NaN hides just its own.
+        const double r = traj.residuals[f](c, i);
+        if (!std::isfinite(r)) continue;
+        b.residual.push_back(std::sqrt(w) * r);
+        if (with_jacobian)
+          b.rows.push_back(std::sqrt(w) * traj.residual_sensitivities[f].row(3 * i + c));
+        b.samples.push_back({e, i, c, times[f], std::sqrt(w)});
+      }
+    }
+  return b;
+}
+
+/// Every rank receives the rows of the experiments it does not own, and their plans
+/// as the sensitivity solves left them (as FitProblem::evaluate shares its results).
+void share_rows(FitProblem& problem, std::vector<ExperimentRows>& blocks) {
+  Communicator& comm = problem.communicator();
+  if (comm.size() == 1) return;
+  ByteWriter out;
+  for (int e = 0; e < problem.num_experiments(); ++e)
+    if (problem.owns(e)) {
+      const ExperimentRows& b = blocks[e];
+      out.put(b.error);
+      out.put(b.rtol);
+      out.put(Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(
+          b.residual.data(), static_cast<long>(b.residual.size()))));
+      Eigen::MatrixXd rows(b.rows.size(), b.rows.empty() ? 0 : b.rows[0].size());
+      for (size_t i = 0; i < b.rows.size(); ++i) rows.row(static_cast<long>(i)) = b.rows[i];
+      out.put(rows);
+      out.put(static_cast<long>(b.samples.size()));
+      for (const ResidualSample& sample : b.samples) out.put(sample);
+      put(out, problem.plan(e));
+    }
+  const std::vector<std::string> shares = comm.all_gather(out.bytes());
+  for (int r = 0; r < comm.size(); ++r) {
+    ByteReader in(shares[r]);
+    for (int e = r; e < problem.num_experiments(); e += comm.size()) {
+      ExperimentRows& b = blocks[e];
+      in.get(b.error);
+      in.get(b.rtol);
+      Eigen::VectorXd residual;
+      in.get(residual);
+      b.residual.assign(residual.data(), residual.data() + residual.size());
+      Eigen::MatrixXd rows;
+      in.get(rows);
+      b.rows.resize(rows.rows());
+      for (long i = 0; i < rows.rows(); ++i) b.rows[i] = rows.row(i);
+      long n = 0;
+      in.get(n);
+      b.samples.resize(n);
+      for (ResidualSample& sample : b.samples) in.get(sample);
+      get(in, problem.plan(e));
+    }
+  }
+}
+
 }  // namespace
 
 GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd& p,
@@ -88,39 +180,24 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
           problem.experiment(e).scenario().path);
       return g;
     }
+  std::vector<ExperimentRows> blocks(problem.num_experiments());
+  // A rank stops at its first failure: an earlier experiment's failure is reported.
+  for (int e = 0; e < problem.num_experiments(); ++e)
+    if (problem.owns(e)) {
+      blocks[e] = experiment_rows(problem, e, p, interrupt, with_jacobian, sensitivity_entries);
+      if (!blocks[e].error.empty()) break;
+    }
+  share_rows(problem, blocks);
   for (int e = 0; e < problem.num_experiments(); ++e) {
-    Experiment& ex = problem.experiment(e);
-    const Scenario& s = ex.scenario();
-    const MarkerObjective& objective = ex.objective();
-    g.rtol = std::max(g.rtol, s.solver.rtol);
-    const MarkerTracks& obs = s.markers.observed;
-    // Runs start at t = 0 (static or rest); frames before that cannot be simulated.
-    const double begin = std::max(0.0, objective.window_begin());
-    const double end = objective.window_end();
-    std::vector<double> times;
-    for (double t : obs.times)
-      if (t >= begin && t <= end) times.push_back(t);
-    if (times.empty()) continue;
-    const MarkerTrajectory traj =
-        simulate_markers(problem, e, p, times, with_jacobian, interrupt, sensitivity_entries);
-    if (!traj.ok) {
-      g.error = fmt::format("{}: {}", s.path, traj.error);
+    const ExperimentRows& b = blocks[e];
+    if (!b.error.empty()) {
+      g.error = b.error;
       return g;
     }
-    for (size_t f = 0; f < times.size(); ++f)
-      for (int i = 0; i < objective.num_markers(); ++i) {
-        const double w = objective.weight(i);
-        if (!(w > 0)) continue;
-        for (int c = 0; c < 3; ++c) {
-          // Coordinates, not markers, are the samples: a NaN hides just its own.
-          const double r = traj.residuals[f](c, i);
-          if (!std::isfinite(r)) continue;
-          residual.push_back(std::sqrt(w) * r);
-          if (with_jacobian)
-            rows.push_back(std::sqrt(w) * traj.residual_sensitivities[f].row(3 * i + c));
-          g.samples.push_back({e, i, c, times[f], std::sqrt(w)});
-        }
-      }
+    g.rtol = std::max(g.rtol, b.rtol);
+    residual.insert(residual.end(), b.residual.begin(), b.residual.end());
+    for (const Eigen::RowVectorXd& row : b.rows) rows.push_back(row);
+    g.samples.insert(g.samples.end(), b.samples.begin(), b.samples.end());
   }
   // Static measurements: a row per observed coordinate, weighted like w seconds of
   // frames of the first captured motion (as Φ weighs them against its tracks).

@@ -75,6 +75,7 @@ struct Context {
   double last_distance = kFirstStep;  // the same in distance_to_best's units
   int budget = 0;
   bool budget_spent = false;
+  bool time_spent = false;  // the budget spent was max_seconds (budget_spent is set too)
   Eigen::VectorXd lo, hi;
   // Without a Gauss–Newton basis the optimiser's x is p ./ unit (ParameterMap::units).
   Eigen::VectorXd unit;

@@ -48,6 +48,10 @@ const char* describe(nlopt::result r) {
   }
 }
 
+const char* budget_reason(const Context& c) {
+  return describe(c.time_spent ? nlopt::MAXTIME_REACHED : nlopt::MAXEVAL_REACHED);
+}
+
 }  // namespace
 
 void limit_trial_steps(GradientOptions& options, long reference_steps) {
@@ -113,8 +117,8 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
   c.budget = budget;
   opt.set_ftol_rel(options.ftol_rel);
   opt.set_xtol_rel(options.xtol_rel);
-  if (options.max_seconds > 0)
-    opt.set_maxtime(std::max(1e-3, options.max_seconds - options.seconds_offset));
+  // max_seconds is checked after each evaluation on rank 0's clock (objective), not
+  // by NLopt on each rank's.
   if (algorithm == nlopt::LD_LBFGS) opt.set_vector_storage(std::min(n, 10));
   if (derivative_free) {
     // BOBYQA's initial trust region: 0.5 in log space, a tenth of the start or of
@@ -198,7 +202,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
       gave_up = true;
     } catch (const nlopt::forced_stop&) {
       c.outcome.stop_reason = c.outcome.interrupted ? "interrupted"
-                              : c.budget_spent      ? describe(nlopt::MAXEVAL_REACHED)
+                              : c.budget_spent      ? budget_reason(c)
                                                     : "stopped";
     } catch (const std::runtime_error& e) {
       if (c.error) std::rethrow_exception(c.error);
@@ -267,8 +271,7 @@ FitOutcome run_fit(FitProblem& problem, const Eigen::VectorXd& p0, const FitOpti
     }
     // L-BFGS reports a force_stop inside its line search as a plain failure.
     if (c.outcome.interrupted || c.budget_spent) {
-      c.outcome.stop_reason =
-          c.outcome.interrupted ? "interrupted" : describe(nlopt::MAXEVAL_REACHED);
+      c.outcome.stop_reason = c.outcome.interrupted ? "interrupted" : budget_reason(c);
       break;
     }
     const int left = budget - c.outcome.evaluations;

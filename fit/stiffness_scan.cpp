@@ -52,8 +52,10 @@ StiffnessScan scan_stiffness(FitProblem& problem, const Eigen::VectorXd& p0,
   const auto run = [&](double s) {
     Eigen::VectorXd p;
     if (!scaled(s, p)) return;
-    if (g.interrupt && g.interrupt->load()) return;
+    // The evaluation's agreed flag, not the signal's: every rank stops at one point.
+    if (scan.interrupted) return;
     const Evaluation ev = problem.evaluate(p, g);
+    scan.interrupted = ev.interrupted;
     ScanPoint pt;
     pt.scale = s;
     pt.ok = ev.ok && std::isfinite(ev.phi);

@@ -31,8 +31,9 @@ struct ScanPoint {
 struct StiffnessScan {
   std::vector<int> entries;  // the entries of p that were scaled (empty: no modulus fitted)
   std::vector<ScanPoint> points;
-  double scale = 1;   // of the best point
-  Eigen::VectorXd p;  // the best point (p0 when nothing beat it)
+  double scale = 1;          // of the best point
+  Eigen::VectorXd p;         // the best point (p0 when nothing beat it)
+  bool interrupted = false;  // the scan stopped early on the interrupt (every rank alike)
 };
 
 /// The entries of p that hold elastic moduli (value blocks of `elastic.*` targets in

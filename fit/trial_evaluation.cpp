@@ -56,8 +56,10 @@ FitRecord record_of(Context& c, const Eigen::VectorXd& p, const Evaluation& ev,
   r.tolerance_scale = tolerance_scale;
   r.evaluation = c.options.first_evaluation + c.outcome.evaluations + 1;
   r.p = p;
-  r.seconds = c.options.seconds_offset +
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - c.start).count();
+  // Rank 0's clock: max_seconds must stop every rank at the same evaluation.
+  r.seconds = c.problem.communicator().from_root(
+      c.options.seconds_offset +
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - c.start).count());
   r.ok = ev.ok;
   g = Eigen::VectorXd::Zero(p.size());
   if (ev.ok) {
@@ -96,7 +98,7 @@ void probe_accuracy(Context& c) {
   ++c.outcome.evaluations;
   c.outcome.history.push_back(r);
   if (c.options.on_evaluation) c.options.on_evaluation(r);
-  if (c.options.gradient.interrupt && c.options.gradient.interrupt->load()) {
+  if (ev.interrupted) {
     c.outcome.interrupted = true;
     throw nlopt::forced_stop();
   }
@@ -216,7 +218,7 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     Eigen::VectorXd g;
     FitRecord r = record_of(c, p, ev, gopt.tolerance_scale, g);
     ++c.outcome.evaluations;
-    const bool interrupted = c.options.gradient.interrupt && c.options.gradient.interrupt->load();
+    const bool interrupted = ev.interrupted;
     // After a tolerance change the best's value is re-measured at its own point.
     const bool remeasure = c.remeasure && ev.ok;
     c.remeasure = false;
@@ -287,6 +289,9 @@ double objective(const std::vector<double>& x, std::vector<double>& grad, void* 
     } else if (c.outcome.evaluations >= c.budget) {
       // NLopt's L-BFGS checks maxeval only between iterations.
       c.budget_spent = true;
+      c.opt->force_stop();
+    } else if (c.options.max_seconds > 0 && r.seconds >= c.options.max_seconds) {
+      c.budget_spent = c.time_spent = true;
       c.opt->force_stop();
     }
     return ev.ok ? c.scale * r.objective : kFailedObjective;
