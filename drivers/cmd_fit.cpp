@@ -45,10 +45,19 @@ FitOptions fit_options(const Scenario& scenario, const FitArgs& args) {
   return o;
 }
 
+/// Prints an error every rank met alike once (by rank 0).
+void print_error(const std::string& message) {
+  if (world().root()) fmt::print(stderr, "error: {}\n", message);
+}
+
 int run(const FitArgs& args) {
+  // Under MPI every rank runs the fit (FitProblem::evaluate shares the experiments'
+  // results, so all take the same path); rank 0 writes the files and prints.
+  Communicator& comm = world();
   Scenario scenario;
   std::unique_ptr<FitProblem> problem;
   FitOptions options;
+  std::string failed;
   try {
     scenario = load_scenario(args.scenario);
     print_notes(scenario);
@@ -63,14 +72,19 @@ int run(const FitArgs& args) {
                                  problem->map().size() <= kGaussNewtonStartParameters &&
                                  options.algorithm == "lbfgs";
   } catch (const Error& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    failed = e.what();
+  }
+  // A rank that could not read a file ends every rank, with its message.
+  if (const std::string why = first_message(comm, failed); !why.empty()) {
+    print_error(why);
     return kExitInputError;
   }
   const std::string outdir = args.outdir.empty()
                                  ? std::filesystem::path(args.scenario).stem().string() + "-fit"
                                  : args.outdir;
-  if (const std::string why = prepare_output_dir(outdir); !why.empty()) {
-    fmt::print(stderr, "error: {}\n", why);
+  if (const std::string why = first_message(comm, comm.root() ? prepare_output_dir(outdir) : "");
+      !why.empty()) {
+    print_error(why);
     return kExitInputError;
   }
   const std::string state_path = (std::filesystem::path(outdir) / "fit-state.yaml").string();
@@ -114,7 +128,7 @@ int run(const FitArgs& args) {
             fmt::format("{}: the saved counters or best values are not finite and "
                         "non-negative; start without --resume",
                         state_path));
-      history.load_existing(saved.evaluations);
+      if (comm.root()) history.load_existing(saved.evaluations);
       state = saved;
       p0 = saved.best;
       options.first_evaluation = saved.evaluations;
@@ -125,7 +139,10 @@ int run(const FitArgs& args) {
       options.gradient.tolerance_scale = std::min(saved.tolerance_scale, 1.0);
     }
   } catch (const Error& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    failed = e.what();
+  }
+  if (const std::string why = first_message(comm, failed); !why.empty()) {
+    print_error(why);
     return kExitInputError;
   }
 
@@ -139,6 +156,7 @@ int run(const FitArgs& args) {
       fmt::print("resuming at solver tolerances {:g}× the scenario's, where the fit was\n", scale);
   }
   options.on_evaluation = [&](const FitRecord& r) {
+    if (!comm.root()) return;
     history.append(r);
     state.evaluations = r.evaluation;
     state.iterations = r.iteration;
@@ -167,8 +185,9 @@ int run(const FitArgs& args) {
         fmt::print("starting at ×{:.3g} of the scenario's moduli (the scan's best)\n", scan.scale);
       p0 = scan.p;
     }
-    if (g_interrupted) {
-      fmt::print(stderr, "interrupted during the stiffness scan; nothing fitted yet\n");
+    if (scan.interrupted) {
+      if (comm.root())
+        fmt::print(stderr, "interrupted during the stiffness scan; nothing fitted yet\n");
       return kExitInterrupted;
     }
   }
@@ -183,17 +202,22 @@ int run(const FitArgs& args) {
     summary.best = out.best.evaluation ? out.p : state.best;
     summary.stop_reason = out.stop_reason;
     summary.uncertainty = out.uncertainty;
-    summary.interrupted = out.interrupted || g_interrupted;
+    summary.interrupted = out.interrupted;
     if (!scenario.fit.lcurve.empty() && !summary.interrupted) {
       if (!args.quiet) fmt::print("L-curve over {} values of gamma\n", scenario.fit.lcurve.size());
       summary.lcurve = run_lcurve(*problem, summary.best, scenario.fit.lcurve, options);
-      summary.interrupted = g_interrupted;
     }
+    // After the collective part: whether the L-curve runs must not hang on a signal.
+    summary.interrupted = summary.interrupted || g_interrupted;
   } catch (const Error& e) {
     // Whatever was accepted so far is in fit-state.yaml and history.csv already.
-    fmt::print(stderr, "error: {}\nbest parameters so far are in {}\n", e.what(), state_path);
+    print_error(fmt::format("{}\nbest parameters so far are in {}", e.what(), state_path));
     return kExitRunFailed;
   }
+  // The other ranks' part is done: rank 0 simulates the outputs' tracks alone (it
+  // holds every experiment's plan, so they come out as a serial run's).
+  if (!comm.root()) return summary.interrupted ? kExitInterrupted : kExitOk;
+  problem->evaluate_alone();
   summary.history = history.records();
   summary.evaluations = state.evaluations;
   summary.failures = state.failures;

@@ -7,6 +7,9 @@
 
 #include "drivers/commands.hpp"
 #include "materials/crash_report.hpp"
+#ifdef KELVIN_MPI
+#include "parallel/mpi_communicator.hpp"
+#endif
 
 namespace kelvin {
 std::atomic<bool> g_interrupted{false};
@@ -37,9 +40,36 @@ namespace {
 void on_signal(int) {
   kelvin::g_interrupted = true;
 }
+
+#ifdef KELVIN_MPI
+/// The commands that run across ranks (`fit`); any other runs on one rank only.
+bool runs_across_ranks(int argc, char** argv, std::string& command) {
+  for (int i = 1; i < argc; ++i)
+    if (argv[i][0] != '-') {
+      command = argv[i];
+      return command == "fit";
+    }
+  return true;  // --help, --version
+}
+#endif
 }  // namespace
 
 int main(int argc, char** argv) {
+#ifdef KELVIN_MPI
+  // kelvin-mpi: every rank runs the command; rank 0 prints and writes the outputs.
+  kelvin::MpiSession session(argc, argv);
+  kelvin::MpiCommunicator comm(&kelvin::g_interrupted);
+  kelvin::set_world(&comm);
+  if (std::string command; comm.size() > 1 && !runs_across_ranks(argc, argv, command)) {
+    if (comm.root())
+      std::fprintf(stderr,
+                   "error: kelvin-mpi runs `fit` across ranks; run `%s` on one rank "
+                   "(mpirun -np 1, or the serial kelvin)\n",
+                   command.c_str());
+    return kelvin::kExitInputError;
+  }
+  if (!comm.root() && !std::freopen("/dev/null", "w", stdout)) return kelvin::kExitRunFailed;
+#endif
   CLI::App app{
       "kelvin: fit visco-elastic FEM models to captured motion of soft objects, and explain the "
       "remaining sim-to-real gap"};

@@ -1,0 +1,126 @@
+// FitProblem across MPI ranks (run by ctest under mpirun -np 2): each rank simulates
+// the experiments it owns, and every rank ends up with what a serial evaluation on
+// one rank gives, to the bit — Φ, ∇Φ, the Gauss–Newton rows, and a whole fit's path.
+#include <gtest/gtest.h>
+
+#include "adjoint/fit_problem.hpp"
+#include "adjoint/uncertainty.hpp"
+#include "fit/fit_loop.hpp"
+#include "mpi_fixture.hpp"
+#include "parallel/mpi_communicator.hpp"
+
+namespace kelvin {
+namespace {
+
+/// The three-motion fit, loaded twice on this rank: spread over the ranks and alone.
+struct Problems {
+  Scenario scenario;
+  std::unique_ptr<FitProblem> spread, alone;
+};
+
+Problems load(const std::string& name, const std::string& fit_keys,
+              const std::string& solver_keys = "") {
+  // Each rank writes its own files: they are identical, and no rank waits for another.
+  const test::fs::path dir = test::scratch(fmt::format("{}-rank{}", name, world().rank()));
+  Problems p;
+  p.scenario = load_scenario(test::write_three_motion_fit(dir, fit_keys, solver_keys));
+  p.spread = std::make_unique<FitProblem>(p.scenario, p.scenario.fit.parameters, world());
+  p.alone =
+      std::make_unique<FitProblem>(p.scenario, p.scenario.fit.parameters, serial_communicator());
+  return p;
+}
+
+TEST(Mpi, TheTestRunsOnTwoRanks) {
+  ASSERT_EQ(world().size(), 2);
+}
+
+TEST(Mpi, AnEvaluationOnTwoRanksIsTheSerialOneBitForBit) {
+  Problems p = load("mpi-evaluate", "");
+  ASSERT_EQ(p.spread->num_experiments(), 3);
+  EXPECT_TRUE(p.spread->owns(world().rank()));
+  EXPECT_FALSE(p.spread->owns(1 - world().rank()));
+  for (GradientMethod method : {GradientMethod::kAdjoint, GradientMethod::kForward}) {
+    GradientOptions o;
+    o.method = method;
+    const Eigen::VectorXd x = p.spread->map().initial();
+    const Evaluation a = p.spread->evaluate(x, o), b = p.alone->evaluate(x, o);
+    ASSERT_TRUE(a.ok) << a.error;
+    ASSERT_TRUE(b.ok) << b.error;
+    EXPECT_EQ(a.phi, b.phi);
+    EXPECT_EQ(a.rms, b.rms);
+    ASSERT_EQ(a.gradient.size(), 2);
+    EXPECT_EQ(a.gradient, b.gradient);
+    EXPECT_GT(a.gradient.norm(), 0);
+    ASSERT_EQ(a.experiments.size(), 3u);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(a.experiments[k].phi_per_marker, b.experiments[k].phi_per_marker) << k;
+      EXPECT_EQ(a.experiments[k].gradient, b.experiments[k].gradient) << k;
+      EXPECT_EQ(a.experiments[k].forward_stats.steps, b.experiments[k].forward_stats.steps) << k;
+      // Each rank holds every experiment's plan as its owner left it.
+      EXPECT_EQ(p.spread->plan(k).order_choice().max_order,
+                p.alone->plan(k).order_choice().max_order)
+          << k;
+    }
+  }
+}
+
+TEST(Mpi, TheGaussNewtonRowsOnTwoRanksAreTheSerialOnes) {
+  Problems p = load("mpi-gauss-newton", "");
+  const Eigen::VectorXd x = p.spread->map().initial();
+  const GaussNewtonSystem a = gauss_newton_system(*p.spread, x),
+                          b = gauss_newton_system(*p.alone, x);
+  ASSERT_TRUE(a.ok) << a.error;
+  ASSERT_TRUE(b.ok) << b.error;
+  ASSERT_GT(a.residual.size(), 100);
+  EXPECT_EQ(a.residual, b.residual);
+  EXPECT_EQ(a.jacobian, b.jacobian);
+  ASSERT_EQ(a.samples.size(), b.samples.size());
+  for (size_t i = 0; i < a.samples.size(); ++i) {
+    EXPECT_EQ(a.samples[i].experiment, b.samples[i].experiment);
+    EXPECT_EQ(a.samples[i].t, b.samples[i].t);
+  }
+}
+
+TEST(Mpi, AJointFitOnTwoRanksTakesTheSerialFitsPath) {
+  Problems p = load("mpi-fit", "  max_evaluations: 12\n");
+  const FitOptions o = fit_options_of(p.scenario);
+  const FitOutcome a = run_fit(*p.spread, p.spread->map().initial(), o);
+  const FitOutcome b = run_fit(*p.alone, p.alone->map().initial(), o);
+  ASSERT_EQ(a.history.size(), 12u);
+  ASSERT_EQ(a.history.size(), b.history.size());
+  for (size_t i = 0; i < a.history.size(); ++i) {
+    EXPECT_EQ(a.history[i].objective, b.history[i].objective) << i;
+    EXPECT_EQ(a.history[i].accepted, b.history[i].accepted) << i;
+  }
+  EXPECT_EQ(a.p, b.p);
+  EXPECT_EQ(a.stop_reason, b.stop_reason);
+  // A path that goes somewhere: μ, 1.6× off at the start, is within 1 % after 12.
+  EXPECT_NEAR(p.spread->map().value(a.p, 0), 3.0e5, 1e-2 * 3.0e5);
+}
+
+TEST(Mpi, ASimulationFailingOnOneRankFailsTheEvaluationOnBoth) {
+  // Motion 1 (rank 1's) is allowed 20 steps: its run fails, the others' do not.
+  Problems p = load("mpi-failure", "", ", max_steps: 20");
+  GradientOptions o;
+  o.method = GradientMethod::kAdjoint;
+  const Evaluation a = p.spread->evaluate(p.spread->map().initial(), o);
+  const Evaluation b = p.alone->evaluate(p.alone->map().initial(), o);
+  EXPECT_FALSE(a.ok);
+  EXPECT_FALSE(b.ok);
+  EXPECT_EQ(a.error, b.error);
+  EXPECT_NE(a.error.find("motion1.yaml"), std::string::npos) << a.error;
+  EXPECT_TRUE(a.experiments[0].ok);
+  EXPECT_FALSE(a.experiments[1].ok);
+  EXPECT_TRUE(a.experiments[2].ok);
+}
+
+}  // namespace
+}  // namespace kelvin
+
+int main(int argc, char** argv) {
+  kelvin::MpiSession session(argc, argv);
+  kelvin::MpiCommunicator comm;
+  kelvin::set_world(&comm);
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();  // mpirun fails when either rank does
+}
