@@ -47,7 +47,7 @@ class FitProblem {
   /// Static measurements come from a `probing:` section of the scenario or of its
   /// experiments; a scenario without tracks is then fitted to them alone.
   /// The scenario must outlive the problem (a temporary would not).
-  /// Experiment i is simulated on rank i mod comm.size() (FitProblem::evaluate).
+  /// Experiments are spread over the ranks of `comm` (FitProblem::owner).
   FitProblem(const Scenario& scenario, std::vector<FitParameterSpec> specs = {},
              Communicator& comm = world());
   FitProblem(Scenario&&, std::vector<FitParameterSpec> = {}, Communicator& = world()) = delete;
@@ -79,10 +79,18 @@ class FitProblem {
   /// Evaluates on this rank alone from now on (rank 0 writing the outputs while
   /// the others have finished): the plans it holds are every experiment's.
   void evaluate_alone() { comm_ = &serial_communicator(); }
-  bool owns(int experiment) const { return experiment % comm_->size() == comm_->rank(); }
+  /// The rank that simulates experiment i: i mod N until the first evaluation that
+  /// succeeds at a tolerance scale, then the ranks balanced by the seconds each
+  /// experiment took there (longest first, to the least loaded rank).
+  int owner(int experiment) const;
+  bool owns(int experiment) const { return owner(experiment) == comm_->rank(); }
 
  private:
   Communicator* comm_;
+  std::vector<int> owners_;    // balanced owners (empty: i mod N)
+  double balanced_scale_ = 0;  // the tolerance scale owners_ were balanced at
+  /// Balances the owners by `results`' seconds, every rank alike (the seconds are shared).
+  void balance(const std::vector<ExperimentResult>& results, double tolerance_scale);
   const Scenario* scenario_ = nullptr;
   std::vector<std::unique_ptr<Scenario>> owned_;  // experiments loaded here
   std::vector<std::unique_ptr<Experiment>> experiments_;

@@ -142,7 +142,8 @@ void share_rows(FitProblem& problem, std::vector<ExperimentRows>& blocks) {
   const std::vector<std::string> shares = comm.all_gather(out.bytes());
   for (int r = 0; r < comm.size(); ++r) {
     ByteReader in(shares[r]);
-    for (int e = r; e < problem.num_experiments(); e += comm.size()) {
+    for (int e = 0; e < problem.num_experiments(); ++e) {
+      if (problem.owner(e) != r) continue;
       ExperimentRows& b = blocks[e];
       in.get(b.error);
       in.get(b.rtol);

@@ -9,20 +9,9 @@ namespace {
 
 using test::fs::path;
 
-test::CliRun run(const std::string& command) {
-  test::CliRun r;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (size_t n = fread(buf, 1, sizeof buf, p)) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
-}
-
 test::CliRun on_two_ranks(const std::string& args) {
-  return run(fmt::format("{} --oversubscribe --allow-run-as-root -np 2 {} {}", KELVIN_MPIEXEC,
-                         KELVIN_MPI_BINARY, args));
+  return test::run_command(fmt::format("{} --oversubscribe --allow-run-as-root -np 2 {} {}",
+                                       KELVIN_MPIEXEC, KELVIN_MPI_BINARY, args));
 }
 
 size_t count(const std::string& text, const std::string& what) {
@@ -51,7 +40,7 @@ TEST(MpiCli, TwoRanksWriteTheSerialFitsFilesAndPrintOnce) {
   const path dir = test::scratch("mpi-cli");
   const std::string scenario = test::write_three_motion_fit(dir, "  max_evaluations: 6\n");
   const test::CliRun serial =
-      run(fmt::format("{} fit {} -o {}", KELVIN_BINARY, scenario, (dir / "serial").string()));
+      test::run_kelvin(fmt::format("fit {} -o {}", scenario, (dir / "serial").string()));
   ASSERT_EQ(serial.exit_code, 0) << serial.out;
   const test::CliRun spread =
       on_two_ranks(fmt::format("fit {} -o {}", scenario, (dir / "mpi").string()));

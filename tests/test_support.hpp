@@ -40,9 +40,9 @@ struct CliRun {
   std::string out;  // stdout and stderr
 };
 
-/// Runs `kelvin <args>` and captures its output.
-inline CliRun run_kelvin(const std::string& args) {
-  const std::string cmd = std::string(KELVIN_BINARY) + " " + args + " 2>&1";
+/// Runs a shell command and captures its output.
+inline CliRun run_command(const std::string& command) {
+  const std::string cmd = command + " 2>&1";
   CliRun r;
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -51,6 +51,11 @@ inline CliRun run_kelvin(const std::string& args) {
   const int status = pclose(p);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   return r;
+}
+
+/// Runs `kelvin <args>` and captures its output.
+inline CliRun run_kelvin(const std::string& args) {
+  return run_command(std::string(KELVIN_BINARY) + " " + args);
 }
 
 /// The synthetic specimen of the gradient and fit tests: a 60 × 20 × 20 mm bar
