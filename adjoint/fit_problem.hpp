@@ -78,7 +78,10 @@ class FitProblem {
   Communicator& communicator() const { return *comm_; }
   /// Evaluates on this rank alone from now on (rank 0 writing the outputs while
   /// the others have finished): the plans it holds are every experiment's.
-  void evaluate_alone() { comm_ = &serial_communicator(); }
+  void evaluate_alone() {
+    comm_ = &serial_communicator();
+    owners_.clear();
+  }
   /// The rank that simulates experiment i: i mod N until the first evaluation that
   /// succeeds at a tolerance scale, then the ranks balanced by the seconds each
   /// experiment took there (longest first, to the least loaded rank).
