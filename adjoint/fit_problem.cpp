@@ -248,6 +248,7 @@ Evaluation FitProblem::evaluate(const Eigen::VectorXd& p, const GradientOptions&
           get(in, results[i]);
           get(in, plans_[i]);
         }
+      if (!in.done()) throw Error("internal: a rank's results were not read to their end");
     }
     if (ev.interrupted && !(options.interrupt && options.interrupt->load())) comm_->interrupt();
     if (!first_thrown.empty()) throw Error(first_thrown);

@@ -160,6 +160,7 @@ void share_rows(FitProblem& problem, std::vector<ExperimentRows>& blocks) {
       for (ResidualSample& sample : b.samples) in.get(sample);
       get(in, problem.plan(e));
     }
+    if (!in.done()) throw Error("internal: a rank's Gauss–Newton rows were not read to their end");
   }
 }
 
@@ -185,7 +186,13 @@ GaussNewtonSystem gauss_newton_system(FitProblem& problem, const Eigen::VectorXd
   // A rank stops at its first failure: an earlier experiment's failure is reported.
   for (int e = 0; e < problem.num_experiments(); ++e)
     if (problem.owns(e)) {
-      blocks[e] = experiment_rows(problem, e, p, interrupt, with_jacobian, sensitivity_entries);
+      try {
+        blocks[e] = experiment_rows(problem, e, p, interrupt, with_jacobian, sensitivity_entries);
+      } catch (const std::exception& x) {
+        // Thrown on one rank, it would leave the others waiting in share_rows.
+        if (problem.communicator().size() == 1) throw;
+        blocks[e].error = fmt::format("{}: {}", problem.experiment(e).scenario().path, x.what());
+      }
       if (!blocks[e].error.empty()) break;
     }
   share_rows(problem, blocks);

@@ -5,6 +5,7 @@
 /// type on every rank; no versioning, nothing written to disk.
 #include <Eigen/Core>
 #include <array>
+#include <climits>
 #include <cstring>
 #include <string>
 #include <type_traits>
@@ -61,7 +62,9 @@ class ByteReader {
     long r = 0, c = 0;
     get(r);
     get(c);
-    check(r * c * static_cast<long>(sizeof(double)));
+    check(r < 0 || c < 0 || (c > 0 && r > LONG_MAX / 8 / c)
+              ? -1
+              : r * c * static_cast<long>(sizeof(double)));
     m.resize(r, c);
     take(m.data(), sizeof(double) * r * c);
   }

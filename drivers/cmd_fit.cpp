@@ -155,8 +155,7 @@ int run(const FitArgs& args) {
     if (scale != 1)
       fmt::print("resuming at solver tolerances {:g}× the scenario's, where the fit was\n", scale);
   }
-  options.on_evaluation = [&](const FitRecord& r) {
-    if (!comm.root()) return;
+  const auto record = [&](const FitRecord& r) {
     history.append(r);
     state.evaluations = r.evaluation;
     state.iterations = r.iteration;
@@ -171,6 +170,17 @@ int run(const FitArgs& args) {
     write_fit_state(state_path, state);
     if (!args.quiet && (r.accepted || !r.ok)) fmt::print("{}\n", progress_line(r));
     std::fflush(stdout);
+  };
+  options.on_evaluation = [&](const FitRecord& r) {
+    if (comm.size() == 1) return record(r);
+    // Rank 0 writes; a write that fails there (a full disk) ends every rank.
+    std::string failed;
+    if (comm.root()) try {
+        record(r);
+      } catch (const Error& e) {
+        failed = e.what();
+      }
+    if (const std::string why = first_message(comm, failed); !why.empty()) throw Error(why);
   };
   options.on_progress = [&](const std::string& line) {
     if (!args.quiet) fmt::print("{}\n", line);
@@ -202,12 +212,14 @@ int run(const FitArgs& args) {
     summary.best = out.best.evaluation ? out.p : state.best;
     summary.stop_reason = out.stop_reason;
     summary.uncertainty = out.uncertainty;
-    summary.interrupted = out.interrupted;
+    // Agreed: a signal after the fit's last evaluation (during its standard errors,
+    // say) must skip the L-curve on every rank or on none.
+    summary.interrupted =
+        out.interrupted || !first_message(comm, g_interrupted ? "interrupted" : "").empty();
     if (!scenario.fit.lcurve.empty() && !summary.interrupted) {
       if (!args.quiet) fmt::print("L-curve over {} values of gamma\n", scenario.fit.lcurve.size());
       summary.lcurve = run_lcurve(*problem, summary.best, scenario.fit.lcurve, options);
     }
-    // After the collective part: whether the L-curve runs must not hang on a signal.
     summary.interrupted = summary.interrupted || g_interrupted;
   } catch (const Error& e) {
     // Whatever was accepted so far is in fit-state.yaml and history.csv already.
@@ -276,7 +288,7 @@ void register_fit(CLI::App& app, int& exit_code) {
       exit_code = run(*args);
     } catch (const std::exception& e) {
       // Errors are reported where they arise; this is the last line of defence.
-      fmt::print(stderr, "error: {}\n", e.what());
+      print_error(e.what());
       exit_code = kExitRunFailed;
     }
   });

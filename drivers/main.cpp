@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "base/communicator.hpp"
 #include "drivers/commands.hpp"
 #include "materials/crash_report.hpp"
 #ifdef KELVIN_MPI
@@ -91,7 +92,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // --help and --version exit 0; every invalid command line exits 1, as documented.
-    return app.exit(e) == 0 ? kelvin::kExitOk : kelvin::kExitInputError;
+    // (Under kelvin-mpi every rank parsed the same line: rank 0 says so.)
+    const int code = kelvin::world().root() ? app.exit(e) : e.get_exit_code();
+    return code == 0 ? kelvin::kExitOk : kelvin::kExitInputError;
   } catch (const std::exception& e) {
     // A failure no command caught (a file system error writing outputs, say): a
     // message and the run-failed code, never an abort.

@@ -22,14 +22,14 @@ MpiCommunicator::MpiCommunicator(std::atomic<bool>* interrupted) : interrupted_(
 }
 
 std::vector<std::string> MpiCommunicator::all_gather(const std::string& mine) {
-  if (mine.size() > static_cast<size_t>(INT_MAX))
-    throw Error("a result shared between ranks exceeds 2 GiB");
-  const int n = static_cast<int>(mine.size());
+  // Sizes first, every rank: one rank's oversized share (−1) ends all of them alike.
+  const int n = mine.size() > static_cast<size_t>(INT_MAX) ? -1 : static_cast<int>(mine.size());
   std::vector<int> sizes(size_), offsets(size_);
   MPI_Allgather(&n, 1, MPI_INT, sizes.data(), 1, MPI_INT, MPI_COMM_WORLD);
   long total = 0;
   for (int r = 0; r < size_; ++r) {
-    if (total > INT_MAX - sizes[r]) throw Error("results shared between ranks exceed 2 GiB");
+    if (sizes[r] < 0 || total > INT_MAX - sizes[r])
+      throw Error("results shared between ranks exceed 2 GiB");
     offsets[r] = static_cast<int>(total);
     total += sizes[r];
   }

@@ -10,6 +10,7 @@
 #include "parallel/mpi_communicator.hpp"
 
 namespace kelvin {
+std::atomic<bool> g_interrupted{false};  // what SIGINT would set; the communicator's too
 namespace {
 
 /// The three-motion fit, loaded twice on this rank: spread over the ranks and alone.
@@ -75,6 +76,12 @@ TEST(Mpi, AnEvaluationOnTwoRanksIsTheSerialOneBitForBit) {
 TEST(Mpi, TheGaussNewtonRowsOnTwoRanksAreTheSerialOnes) {
   Problems p = load("mpi-gauss-newton", "");
   const Eigen::VectorXd x = p.spread->map().initial();
+  // After an evaluation the owners are balanced (no longer i mod 2): the rows travel
+  // by them.
+  GradientOptions plain;
+  plain.method = GradientMethod::kNone;
+  ASSERT_TRUE(p.spread->evaluate(x, plain).ok);
+  ASSERT_TRUE(p.alone->evaluate(x, plain).ok);
   const GaussNewtonSystem a = gauss_newton_system(*p.spread, x),
                           b = gauss_newton_system(*p.alone, x);
   ASSERT_TRUE(a.ok) << a.error;
@@ -122,12 +129,26 @@ TEST(Mpi, ASimulationFailingOnOneRankFailsTheEvaluationOnBoth) {
   EXPECT_TRUE(a.experiments[2].ok);
 }
 
+TEST(Mpi, AnInterruptOnOneRankStopsTheEvaluationOnBoth) {
+  Problems p = load("mpi-interrupt", "");
+  // Only rank 1 receives the signal (before its run: its experiment stops at once).
+  g_interrupted = world().rank() == 1;
+  GradientOptions o;
+  o.method = GradientMethod::kNone;
+  o.interrupt = &g_interrupted;
+  const Evaluation ev = p.spread->evaluate(p.spread->map().initial(), o);
+  EXPECT_TRUE(ev.interrupted);
+  EXPECT_TRUE(g_interrupted);  // rank 0's flag, raised through Communicator::interrupt
+  EXPECT_FALSE(ev.ok);
+  g_interrupted = false;
+}
+
 }  // namespace
 }  // namespace kelvin
 
 int main(int argc, char** argv) {
   kelvin::MpiSession session(argc, argv);
-  kelvin::MpiCommunicator comm;
+  kelvin::MpiCommunicator comm(&kelvin::g_interrupted);
   kelvin::set_world(&comm);
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();  // mpirun fails when either rank does
