@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <map>
 
 #include "adjoint/marker_trajectory.hpp"
 #include "adjoint/uncertainty.hpp"
@@ -56,10 +57,15 @@ RmsAt rms_at(FitProblem& problem, const Eigen::VectorXd& p, const std::atomic<bo
   return out;
 }
 
+/// Simulated markers of experiment k over its frames in the objective window, at the
+/// start (false) or the fitted point (true): each run serves every plotted marker of
+/// the experiment (the bundled example's three plots had taken six runs).
+using PlotRuns = std::map<std::pair<int, bool>, MarkerTrajectory>;
+
 /// Observed frames of `marker` inside the objective window, and the simulated
 /// positions there with the start and the fitted parameters.
 bool track_plot(FitProblem& problem, int k, const std::string& marker, const FitSummary& s,
-                const std::atomic<bool>* interrupt, TrackPlot& plot) {
+                const std::atomic<bool>* interrupt, PlotRuns& runs, TrackPlot& plot) {
   Experiment& ex = problem.experiment(k);
   const MarkerTracks& tracks = ex.scenario().markers.observed;
   const auto& embedded = ex.scenario().markers.embedded;
@@ -76,8 +82,15 @@ bool track_plot(FitProblem& problem, int k, const std::string& marker, const Fit
   }
   if (frames.empty()) return false;
   for (int f : frames) plot.t.push_back(tracks.times[f]);
-  const MarkerTrajectory before = simulate_markers(problem, k, s.start, plot.t, false, interrupt);
-  const MarkerTrajectory after = simulate_markers(problem, k, s.best, plot.t, false, interrupt);
+  const auto run = [&](bool fitted) -> const MarkerTrajectory& {
+    auto [at, fresh] = runs.try_emplace({k, fitted});
+    if (fresh)
+      at->second =
+          simulate_markers(problem, k, fitted ? s.best : s.start, plot.t, false, interrupt);
+    return at->second;
+  };
+  const MarkerTrajectory& before = run(false);
+  const MarkerTrajectory& after = run(true);
   if (!before.ok || !after.ok) return false;
   const int m = static_cast<int>(frames.size());
   plot.experiment = ex.scenario().name;
@@ -204,9 +217,10 @@ std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
     for (int i = 0; i < std::min<int>(kWorstTracks, order.size()); ++i) chosen.push_back(order[i]);
     for (int i = 0; i<kBestTracks&& static_cast<int>(order.size())> kWorstTracks + i; ++i)
       chosen.push_back(order[order.size() - 1 - i]);
+    PlotRuns runs;
     for (int i : chosen) {
       TrackPlot plot;
-      if (track_plot(problem, where[i].first, where[i].second, s, interrupt, plot)) {
+      if (track_plot(problem, where[i].first, where[i].second, s, interrupt, runs, plot)) {
         plot.rms_before = data.markers[i].before;
         plot.rms_after = data.markers[i].after;
         data.tracks.push_back(std::move(plot));
