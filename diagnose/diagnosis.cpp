@@ -830,8 +830,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       res.where = cand.where;
     const fs::path dir = out / "refits" / name;
     model.problem->map().apply(fit.p, model.problem->experiment(0).model());
-    res.fitted_yaml = write_fitted_scenario(*model.scenario, map,
-                                            model.problem->experiment(0).model(), dir.string());
+    res.fitted_yaml = write_fitted_scenario(
+        *model.scenario, map, model.problem->experiment(0).model(), dir.string(), fit.p);
     // Held-out motions.
     th = Clock::now();
     double spread = 0;

@@ -175,7 +175,7 @@ std::string write_fit_outputs(FitProblem& problem, const FitSummary& s,
   // fitted.yaml first: it is what the user came for, and needs no simulation.
   FemModel& model = problem.model();
   map.apply(s.best, model);
-  write_fitted_scenario(scenario, map, model, s.outdir);
+  write_fitted_scenario(scenario, map, model, s.outdir, s.best);
   data.files.push_back("fitted.yaml");
   data.files.push_back("history.csv");
   data.files.push_back("fit-state.yaml");

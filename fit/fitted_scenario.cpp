@@ -74,7 +74,8 @@ void set_scalar(YAML::Node material, const Scenario& s, const FemModel& model, c
 }  // namespace
 
 std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& map,
-                                  const FemModel& model, const std::string& outdir) {
+                                  const FemModel& model, const std::string& outdir,
+                                  const Eigen::VectorXd& p) {
   const yamlutil::Doc doc(scenario.path);
   YAML::Node root = doc.root();  // a handle: edits change the document's tree
   absolute_scenario_paths(root, doc);
@@ -153,10 +154,35 @@ std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& 
   }
 
   // The fitted values are now the scenario's, so a further fit starts from them.
-  if (const YAML::Node params = yaml_child(yaml_child(root, "fit"), "parameters");
-      params.IsDefined() && params.IsSequence())
-    for (auto p : params)
-      if (p.IsMap()) p.remove("initial");
+  std::string observation;  // header lines of the fitted observation parameters
+  if (YAML::Node params = yaml_child(yaml_child(root, "fit"), "parameters");
+      params.IsDefined() && params.IsSequence()) {
+    for (auto entry : params)
+      if (entry.IsMap()) entry.remove("initial");
+    // The observation parameters have no place in the model: a one-entry block (the
+    // clock offset) starts a further fit where this one ended, and every block is
+    // listed for people.
+    if (p.size() == map.size())
+      for (const ObservationBlock& o : map.observation_blocks()) {
+        observation += fmt::format("#   {} =", o.target);
+        for (int j = 0; j < o.count; ++j) observation += fmt::format(" {:.6g}", p[o.offset + j]);
+        observation += "\n";
+        if (o.count != 1) continue;
+        for (std::size_t k = 0; k < params.size(); ++k) {
+          YAML::Node entry = params[k];
+          const bool named = entry.IsScalar() ? entry.as<std::string>() == o.target
+                                              : entry.IsMap() && entry["target"] &&
+                                                    entry["target"].as<std::string>() == o.target;
+          if (!named) continue;
+          if (entry.IsScalar()) {
+            YAML::Node spelled;
+            spelled["target"] = o.target;
+            params[k] = spelled;
+          }
+          params[k]["initial"] = exact(p[o.offset]);
+        }
+      }
+  }
   // Without a name the file's stem ("fitted") would rename the outputs.
   if (!yaml_child(root, "name")) root["name"] = scenario.name;
 
@@ -164,9 +190,12 @@ std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& 
   out << root;
   const std::string input = fs::absolute(scenario.path).lexically_normal().string();
   const std::string path = (dir / "fitted.yaml").string();
+  if (!observation.empty())
+    observation = "# Fitted observation parameters (of the capture, not the model; SI units):\n" +
+                  observation;
   write_file_atomic(path, fmt::format("# Written by kelvin fit from {}: that scenario with the "
-                                      "fitted parameters substituted.\n{}\n",
-                                      input, out.c_str()));
+                                      "fitted parameters substituted.\n{}{}\n",
+                                      input, observation, out.c_str()));
   return path;
 }
 

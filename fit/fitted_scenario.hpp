@@ -15,8 +15,12 @@ namespace kelvin {
 
 /// `model` holds the fitted values (map.apply already called). Writes
 /// `<outdir>/fitted.yaml` (and fitted-fields.csv when needed) atomically and
-/// returns the path of fitted.yaml.
+/// returns the path of fitted.yaml. With the fitted vector `p`, the observation
+/// parameters (clock offset, marker offsets, registration: the capture's, not the
+/// model's) are listed in its header, and a one-entry one becomes the `initial` of
+/// its fit entry, so that a further fit starts from it.
 std::string write_fitted_scenario(const Scenario& scenario, const ParameterMap& map,
-                                  const FemModel& model, const std::string& outdir);
+                                  const FemModel& model, const std::string& outdir,
+                                  const Eigen::VectorXd& p = {});
 
 }  // namespace kelvin

@@ -230,3 +230,40 @@ TEST_F(FittedScenario, BadFieldsFilesAreRefusedWithFileAndLine) {
 }
 
 }  // namespace
+
+TEST_F(FittedScenario, ObservationParametersAreListedAndTheClockOffsetStartsTheNextFit) {
+  const Scenario s =
+      load_scenario(write("bar.yaml", bar(kMaterial,
+                                          "  parameters:\n"
+                                          "    - elastic.mu\n"
+                                          "    - markers.clock_offset\n"
+                                          "    - { target: markers.tip.offset }\n")));
+  auto model = build_model(s);
+  const ParameterMap map(s.fit.parameters, s, *model, {"tip"});
+  ASSERT_EQ(map.observation_blocks().size(), 2u);
+  Eigen::VectorXd p = map.initial();
+  const auto block = [](const ParameterMap& m, const std::string& target) {
+    for (const ObservationBlock& o : m.observation_blocks())
+      if (o.target == target) return o;
+    throw Error("no block " + target);
+  };
+  const ObservationBlock clock = block(map, "markers.clock_offset");
+  const ObservationBlock tip = block(map, "markers.tip.offset");
+  p[clock.offset] = 0.0125;
+  p.segment(tip.offset, 3) << 0.001, -0.002, 0.003;
+  map.apply(p, *model);
+  const std::string path = write_fitted_scenario(s, map, *model, (dir_ / "out").string(), p);
+
+  const std::string text = read_text(path);
+  EXPECT_NE(text.find("#   markers.clock_offset = 0.0125\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("#   markers.tip.offset = 0.001 -0.002 0.003\n"), std::string::npos) << text;
+  // The next fit starts at the fitted clock offset (the string entry became a mapping);
+  // the marker offsets, three numbers, start at zero again.
+  const Scenario back = load_scenario(path);
+  auto rebuilt = build_model(back);
+  const ParameterMap again(back.fit.parameters, back, *rebuilt, {"tip"});
+  const Eigen::VectorXd start = again.initial();
+  EXPECT_EQ(start[block(again, "markers.clock_offset").offset], 0.0125);
+  EXPECT_EQ(start.segment(block(again, "markers.tip.offset").offset, 3).norm(), 0);
+  EXPECT_EQ(again.value(start, 0), map.value(p, 0));  // μ, as every fitted material value
+}
