@@ -60,9 +60,19 @@ class EvaluationPlan {
   void note_adjoint_peaks(const AdjointPeaks& per_rms) { adjoint_peaks_ = per_rms; }
 
  private:
-  // Packed whole for the ranks that do not own the experiment (result_exchange.hpp).
+  // Packed whole for the ranks that do not own the experiment (result_exchange.hpp):
+  // every field, in one order for the writer and the reader.
   friend void put(ByteWriter&, const EvaluationPlan&);
   friend void get(ByteReader&, EvaluationPlan&);
+  template <class Bytes, class Plan>
+  static void fields(Bytes& io, Plan& plan) {
+    io(plan.segment_);
+    io(plan.planned_scale_);
+    io(plan.planned_steps_);
+    io(plan.order_choice_);
+    io(plan.order_scale_);
+    io(plan.adjoint_peaks_);
+  }
   double segment_ = -1;       // automatic segment length; < 0 until planned
   double planned_scale_ = 0;  // the tolerance scale segment_ was planned at
   long planned_steps_ = 0;

@@ -5,58 +5,42 @@ namespace kelvin {
 static_assert(std::is_trivially_copyable_v<IntegratorStats>);
 static_assert(std::is_trivially_copyable_v<OrderChoice>);
 
-void put(ByteWriter& out, const ExperimentResult& r) {
-  out.put(r.ok);
-  out.put(r.error);
-  out.put(r.t_reached);
-  out.put(r.t_furthest);
-  out.put(r.phi_per_marker);
-  out.put(r.phi_targets);
-  out.put(r.phi);
-  out.put(r.rms);
-  out.put(r.gradient);
-  out.put(r.dphi_dtheta);
-  out.put(r.forward_stats);
-  out.put(r.backward_stats);
-  out.put(r.backward_steps);
-  out.put(r.segments);
-  out.put(r.seconds);
+namespace {
+
+/// Every field, in one order for the writer and the reader.
+template <class Bytes, class Result>
+void fields(Bytes& io, Result& r) {
+  io(r.ok);
+  io(r.error);
+  io(r.t_reached);
+  io(r.t_furthest);
+  io(r.phi_per_marker);
+  io(r.phi_targets);
+  io(r.phi);
+  io(r.rms);
+  io(r.gradient);
+  io(r.dphi_dtheta);
+  io(r.forward_stats);
+  io(r.backward_stats);
+  io(r.backward_steps);
+  io(r.segments);
+  io(r.seconds);
 }
 
+}  // namespace
+
+void put(ByteWriter& out, const ExperimentResult& r) {
+  fields(out, r);
+}
 void get(ByteReader& in, ExperimentResult& r) {
-  in.get(r.ok);
-  in.get(r.error);
-  in.get(r.t_reached);
-  in.get(r.t_furthest);
-  in.get(r.phi_per_marker);
-  in.get(r.phi_targets);
-  in.get(r.phi);
-  in.get(r.rms);
-  in.get(r.gradient);
-  in.get(r.dphi_dtheta);
-  in.get(r.forward_stats);
-  in.get(r.backward_stats);
-  in.get(r.backward_steps);
-  in.get(r.segments);
-  in.get(r.seconds);
+  fields(in, r);
 }
 
 void put(ByteWriter& out, const EvaluationPlan& plan) {
-  out.put(plan.segment_);
-  out.put(plan.planned_scale_);
-  out.put(plan.planned_steps_);
-  out.put(plan.order_choice_);
-  out.put(plan.order_scale_);
-  out.put(plan.adjoint_peaks_);
+  EvaluationPlan::fields(out, plan);
 }
-
 void get(ByteReader& in, EvaluationPlan& plan) {
-  in.get(plan.segment_);
-  in.get(plan.planned_scale_);
-  in.get(plan.planned_steps_);
-  in.get(plan.order_choice_);
-  in.get(plan.order_scale_);
-  in.get(plan.adjoint_peaks_);
+  EvaluationPlan::fields(in, plan);
 }
 
 }  // namespace kelvin

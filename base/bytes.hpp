@@ -32,6 +32,11 @@ class ByteWriter {
     put(static_cast<long>(m.cols()));
     bytes_.append(reinterpret_cast<const char*>(m.data()), sizeof(double) * m.size());
   }
+  /// One call for packing and unpacking alike (fields walked in one list).
+  template <class T>
+  void operator()(const T& v) {
+    put(v);
+  }
   const std::string& bytes() const { return bytes_; }
 
  private:
@@ -67,6 +72,10 @@ class ByteReader {
               : r * c * static_cast<long>(sizeof(double)));
     m.resize(r, c);
     take(m.data(), sizeof(double) * r * c);
+  }
+  template <class T>
+  void operator()(T& v) {
+    get(v);
   }
   bool done() const { return at_ == bytes_.size(); }
 

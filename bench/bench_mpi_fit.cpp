@@ -82,7 +82,7 @@ Timed fit(const Scenario& s, Communicator& comm) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  MpiSession session(argc, argv);
+  MpiRuntime mpi(argc, argv);
   MpiCommunicator world_comm;
   set_world(&world_comm);
   CLI::App app{"joint fit of four motions: one rank against all ranks"};

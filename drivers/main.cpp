@@ -58,7 +58,7 @@ bool runs_across_ranks(int argc, char** argv, std::string& command) {
 int main(int argc, char** argv) {
 #ifdef KELVIN_MPI
   // kelvin-mpi: every rank runs the command; rank 0 prints and writes the outputs.
-  kelvin::MpiSession session(argc, argv);
+  kelvin::MpiRuntime mpi(argc, argv);
   kelvin::MpiCommunicator comm(&kelvin::g_interrupted);
   kelvin::set_world(&comm);
   if (std::string command; comm.size() > 1 && !runs_across_ranks(argc, argv, command)) {

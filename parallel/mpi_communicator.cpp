@@ -8,11 +8,11 @@
 
 namespace kelvin {
 
-MpiSession::MpiSession(int& argc, char**& argv) {
+MpiRuntime::MpiRuntime(int& argc, char**& argv) {
   MPI_Init(&argc, &argv);
 }
 
-MpiSession::~MpiSession() {
+MpiRuntime::~MpiRuntime() {
   MPI_Finalize();
 }
 

@@ -9,12 +9,12 @@
 namespace kelvin {
 
 /// MPI_Init on construction, MPI_Finalize on destruction: one per process.
-class MpiSession {
+class MpiRuntime {
  public:
-  MpiSession(int& argc, char**& argv);
-  ~MpiSession();
-  MpiSession(const MpiSession&) = delete;
-  MpiSession& operator=(const MpiSession&) = delete;
+  MpiRuntime(int& argc, char**& argv);
+  ~MpiRuntime();
+  MpiRuntime(const MpiRuntime&) = delete;
+  MpiRuntime& operator=(const MpiRuntime&) = delete;
 };
 
 class MpiCommunicator : public Communicator {

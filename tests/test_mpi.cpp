@@ -147,7 +147,7 @@ TEST(Mpi, AnInterruptOnOneRankStopsTheEvaluationOnBoth) {
 }  // namespace kelvin
 
 int main(int argc, char** argv) {
-  kelvin::MpiSession session(argc, argv);
+  kelvin::MpiRuntime mpi(argc, argv);
   kelvin::MpiCommunicator comm(&kelvin::g_interrupted);
   kelvin::set_world(&comm);
   ::testing::InitGoogleTest(&argc, argv);
