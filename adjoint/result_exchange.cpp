@@ -4,6 +4,7 @@ namespace kelvin {
 
 static_assert(std::is_trivially_copyable_v<IntegratorStats>);
 static_assert(std::is_trivially_copyable_v<OrderChoice>);
+static_assert(std::is_trivially_copyable_v<ResidualSample>);
 
 namespace {
 
@@ -27,6 +28,16 @@ void fields(Bytes& io, Result& r) {
   io(r.seconds);
 }
 
+template <class Bytes, class System>
+void gauss_newton_fields(Bytes& io, System& g) {
+  io(g.ok);
+  io(g.error);
+  io(g.residual);
+  io(g.jacobian);
+  each_of(io, g.samples, [](auto& bytes, auto& sample) { bytes(sample); });
+  io(g.rtol);
+}
+
 }  // namespace
 
 void put(ByteWriter& out, const ExperimentResult& r) {
@@ -41,6 +52,13 @@ void put(ByteWriter& out, const EvaluationPlan& plan) {
 }
 void get(ByteReader& in, EvaluationPlan& plan) {
   EvaluationPlan::fields(in, plan);
+}
+
+void put(ByteWriter& out, const GaussNewtonSystem& g) {
+  gauss_newton_fields(out, g);
+}
+void get(ByteReader& in, GaussNewtonSystem& g) {
+  gauss_newton_fields(in, g);
 }
 
 }  // namespace kelvin

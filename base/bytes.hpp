@@ -78,6 +78,11 @@ class ByteReader {
     get(v);
   }
   bool done() const { return at_ == bytes_.size(); }
+  /// A list's length n read back, checked against what is left to read.
+  std::size_t items(long n) const {
+    check(n);
+    return static_cast<std::size_t>(n);
+  }
 
  private:
   void check(long n) const {
@@ -92,5 +97,15 @@ class ByteReader {
   const std::string& bytes_;
   size_t at_ = 0;
 };
+
+/// A list packed as its length and its items, `item(io, x)` each: one call for the
+/// writer and the reader, as with operator().
+template <class IO, class List, class Item>
+void each_of(IO& io, List& list, Item&& item) {
+  long n = static_cast<long>(list.size());
+  io(n);
+  if constexpr (std::is_same_v<IO, ByteReader>) list.resize(io.items(n));
+  for (auto& x : list) item(io, x);
+}
 
 }  // namespace kelvin

@@ -53,4 +53,13 @@ inline std::string first_message(Communicator& comm, const std::string& mine) {
   return "";
 }
 
+/// Collective: whether any rank was interrupted (`mine`: this one), raised on every
+/// rank, so that all stop at the same point.
+inline bool any_interrupted(Communicator& comm, bool mine) {
+  if (comm.size() == 1) return mine;
+  const bool any = !first_message(comm, mine ? "interrupted" : "").empty();
+  if (any && !mine) comm.interrupt();
+  return any;
+}
+
 }  // namespace kelvin

@@ -16,6 +16,8 @@
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
 #include "base/error.hpp"
+#include "base/spread_tasks.hpp"
+#include "diagnose/diagnosis_exchange.hpp"
 #include "diagnose/diagnosis_model.hpp"
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/heldout_prediction.hpp"
@@ -51,11 +53,44 @@ MisfitFigures misfit(FitProblem& problem, const Eigen::VectorXd& p,
   return f;
 }
 
+std::vector<std::string> labels_of(const ParameterMap& map) {
+  std::vector<std::string> labels;
+  for (int j = 0; j < map.size(); ++j) labels.push_back(map.label(j));
+  return labels;
+}
+
 /// Saved parameters of a finished fit: `label,value` lines (optimiser space).
-void save_parameters(const std::string& path, const ParameterMap& map, const Eigen::VectorXd& p) {
+void save_parameters(const std::string& path, const std::vector<std::string>& labels,
+                     const Eigen::VectorXd& p) {
   std::string csv = "label,value\n";
-  for (int j = 0; j < map.size(); ++j) csv += fmt::format("{},{:.17g}\n", map.label(j), p[j]);
+  for (std::size_t j = 0; j < labels.size(); ++j)
+    csv += fmt::format("{},{:.17g}\n", labels[j], p[static_cast<long>(j)]);
   write_file_atomic(path, csv);
+}
+
+/// Collective: `write()` on rank 0 alone, its value on every rank; its failure ends
+/// every rank with its message (no rank may go on to wait for one that stopped) as a
+/// failed run, not an input error.
+std::string on_root(const std::function<std::string()>& write) {
+  Communicator& comm = world();
+  ByteWriter out;
+  if (comm.root()) {
+    std::string value, error;
+    try {
+      value = write();
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    out.put(error);
+    out.put(value);
+  }
+  const std::vector<std::string> all = comm.all_gather(out.bytes());
+  ByteReader in(all[0]);
+  std::string error, value;
+  in.get(error);
+  in.get(value);
+  if (!error.empty()) throw std::runtime_error(error);
+  return value;
 }
 
 /// The saved parameters when they are for this map, else empty.
@@ -84,19 +119,22 @@ struct FitRun {
   Eigen::VectorXd p;
   int evaluations = 0;
   bool ok = false, resumed = false;
+  bool finished = false;  // ran to its end now: its parameters are to be saved
   std::string error;
 };
 
+/// Fits m from p0 (or reads the parameters a finished fit saved at `state`, on
+/// --resume); progress lines go through `say`.
 FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
-                 const DiagnoseOptions& o, const std::string& label, double ftol_rel,
-                 int max_evaluations = 0) {
+                 const DiagnoseOptions& o, const ProgressLine& say, const std::string& label,
+                 double ftol_rel, int max_evaluations = 0) {
   FitRun run;
   const ParameterMap& map = m.problem->map();
   if (o.resume) {
     run.p = load_parameters(state, map);
     if (run.p.size() == map.size()) {
       run.ok = run.resumed = true;
-      if (o.progress) o.progress(fmt::format("  {}: resumed from {}", label, state));
+      if (say) say(fmt::format("  {}: resumed from {}", label, state));
       return run;
     }
   }
@@ -110,29 +148,27 @@ FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
   if (max_evaluations > 0) f.max_evaluations = max_evaluations;
   if (o.max_evaluations > 0) f.max_evaluations = o.max_evaluations;
   f.on_progress = [&](const std::string& line) {
-    if (o.progress) o.progress(fmt::format("  {}: {}", label, line));
+    if (say) say(fmt::format("  {}: {}", label, line));
   };
   // Every trial, so that the time a refit spends on rejected line-search trials or
   // failed simulations is seen where it is spent.
   f.on_evaluation = [&](const FitRecord& r) {
-    if (!o.progress) return;
+    if (!say) return;
     const std::string what = r.accepted ? fmt::format("rms {:8.4f} mm", r.rms * 1e3)
                              : r.ok     ? fmt::format("rms {:8.4f} mm (not better)", r.rms * 1e3)
                                         : "failed: " + r.error;
-    o.progress(
-        fmt::format("  {}: eval {:3d}  {}  {:7.1f} s", label, r.evaluation, what, r.seconds));
+    say(fmt::format("  {}: eval {:3d}  {}  {:7.1f} s", label, r.evaluation, what, r.seconds));
   };
   const FitOutcome out = run_fit(*m.problem, p0, f);
   run.evaluations = out.evaluations;
-  if (o.progress)
-    o.progress(fmt::format("  {}: {} evaluations; {}", label, out.evaluations, out.stop_reason));
+  if (say) say(fmt::format("  {}: {} evaluations; {}", label, out.evaluations, out.stop_reason));
   if (!out.best.evaluation) {
     run.error = out.history.empty() ? out.stop_reason : out.history.back().error;
     return run;
   }
   run.p = out.p;
   run.ok = true;
-  if (!out.interrupted) save_parameters(state, map, run.p);
+  run.finished = !out.interrupted;
   return run;
 }
 
@@ -253,7 +289,7 @@ void predict_heldout_drops(Diagnosis& d, const std::vector<int>& order,
     std::fill(d.predicted_heldout_drop.begin(), d.predicted_heldout_drop.end(), nan);
   };
   for (std::size_t k = 0; k < d.settings.validate.size(); ++k) {
-    if (o.interrupt && o.interrupt->load()) return fail("interrupted");
+    if (any_interrupted(world(), o.interrupt && o.interrupt->load())) return fail("interrupted");
     const std::string& path = d.settings.validate[k];
     Model h = load_model(path, nominal, all, true,
                          (models / fmt::format("heldout{}-screening.yaml", k)).string());
@@ -339,7 +375,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   const auto say = [&](const std::string& line) {
     if (o.progress) o.progress(line);
   };
-  const auto stopped = [&] { return o.interrupt && o.interrupt->load(); };
+  // Whether to stop: this rank's flag inside a task it runs alone; agreed by every
+  // rank where they go on together (a SIGINT reaches them at different moments).
+  const auto stopped_here = [&] { return o.interrupt && o.interrupt->load(); };
+  const auto stopped = [&] { return any_interrupted(world(), stopped_here()); };
   const fs::path out(outdir), state = out / "state", models = out / "models";
   fs::create_directories(state);
   fs::create_directories(models);
@@ -429,8 +468,14 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       nominal_ftol = precision(g0.residual, n0.sigma);
     }
   }
-  const FitRun nominal_fit = fit_model(base, p_start, nominal_state, o, "nominal", nominal_ftol);
+  const FitRun nominal_fit =
+      fit_model(base, p_start, nominal_state, o, o.progress, "nominal", nominal_ftol);
   if (!nominal_fit.ok) throw Error(fmt::format("the nominal fit failed: {}", nominal_fit.error));
+  if (nominal_fit.finished)
+    on_root([&] {
+      save_parameters(nominal_state, labels_of(base_map), nominal_fit.p);
+      return std::string();
+    });
   const Eigen::VectorXd p_nominal = nominal_fit.p;
   d.nominal_evaluations = nominal_fit.evaluations;
   d.nominal_parameters = named_values(base_map, p_nominal, range(base_map.size()));
@@ -475,9 +520,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                   "differences)",
                   d.nominal_train.rms * 1e3, d.noise.sigma * 1e3, d.noise.differences));
   d.seconds.screening = since(t0);
+  // The missing force's basis; the field is fitted beside the refits (stage 3).
   MissingForceSettings mfs = d.settings.missing_force;
+  bool force_wanted = false;
   if (d.settings.missing_force.enabled && !stopped()) {
-    const auto tf = Clock::now();
     if (mfs.knots_per_second <= 0) {
       // Four knots per period at the top of the band that brings the residual's power
       // to 90 %, but no faster than the observed motion (95 % of its power; a short
@@ -494,17 +540,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       mfs.knots_per_second =
           4 * std::max(std::min(top(0.9, true), top(0.95, false)), 1 / nominal.time.end);
     }
-    say(fmt::format("  missing force: {} knots in time × {} segments × 3 axes, {} evaluations",
-                    std::lround(mfs.knots_per_second * nominal.time.end), mfs.segments,
-                    mfs.evaluations));
-    d.missing_force =
-        fit_missing_force(*base.problem, nominal, p_nominal, axis,
-                          {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
-                          (out / "missing-force").string(), o.interrupt, o.progress);
-    say("  missing force: " + describe(d.missing_force));
-    d.seconds.missing_force = since(tf);
-    t0 = Clock::now();
+    force_wanted = true;
   }
+  t0 = Clock::now();
 
   std::vector<std::pair<std::string, std::vector<int>>> groups;
   ScreeningOptions so;
@@ -599,17 +637,22 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   std::map<int, Eigen::VectorXd> probe_start;
   const Eigen::MatrixXd nominal_columns = g.jacobian.leftCols(n_nominal);
   const auto nominal_step = nominal_columns.completeOrthogonalDecomposition();
+  std::vector<int> probed;
   for (const auto& rc : d.ranking.order) {
     const int c = rc.candidate;
-    const auto& entries_c = groups[c].second;
-    if (stopped() || !rc.marginal.error.empty() || entries_c.size() != 1 ||
-        rc.marginal.statistic > rc.threshold)
-      continue;
-    const bool at_bound = std::find(so.nonnegative.begin(), so.nonnegative.end(), entries_c[0]) !=
-                          so.nonnegative.end();
+    if (!stopped() && rc.marginal.error.empty() && groups[c].second.size() == 1 &&
+        rc.marginal.statistic <= rc.threshold)
+      probed.push_back(c);
+  }
+  // Its probes, on this rank alone: the best LR above the score's, and where (an empty
+  // p when none is).
+  const auto probe = [&](int c, const ProgressLine& line) {
+    const int e = groups[c].second[0];
+    const bool at_bound =
+        std::find(so.nonnegative.begin(), so.nonnegative.end(), e) != so.nonnegative.end();
     const Candidate& cand = d.candidates[c];
-    Model model =
-        load_model(d.scenario, nominal, {&cand}, false, (models / (slug(cand) + ".yaml")).string());
+    Model model = load_model(d.scenario, nominal, {&cand}, false,
+                             (models / (slug(cand) + ".yaml")).string(), -1, serial_communicator());
     const ParameterMap& map = model.problem->map();
     const int j = entries_of(model, model.extended.candidate_specs[0])[0];
     Eigen::VectorXd p0 = map.initial();
@@ -621,8 +664,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     else
       for (double sign : {-1.0, 1.0})
         values.push_back(std::clamp(p0[j] + sign * size, map.lower()[j], map.upper()[j]));
+    double best = marginal[c].statistic;
+    Eigen::VectorXd start;
     for (double value : values) {
-      if (stopped() || value == p0[j]) continue;
+      if (stopped_here() || value == p0[j]) continue;
       Eigen::VectorXd p = p0;
       p[j] = value;
       MisfitFigures f = misfit(*model.problem, p, o.interrupt);
@@ -637,14 +682,18 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         p = q;
       }
       const double lr = (d.nominal_train.sum_sq - f.sum_sq) / sigma2;
-      say(fmt::format("  {:<22} probe at {} = {:.4g}{}: rms {:.4f} mm, LR {:.1f}", slug(cand),
-                      map.label(j), map.value(p, j),
-                      adjusted ? " (nominal parameters re-adjusted)" : "", f.rms * 1e3, lr));
-      if (lr <= marginal[c].statistic) continue;
-      marginal[c].statistic = lr;
-      probe_start[c] = p;
+      line(fmt::format("  {:<22} probe at {} = {:.4g}{}: rms {:.4f} mm, LR {:.1f}", slug(cand),
+                       map.label(j), map.value(p, j),
+                       adjusted ? " (nominal parameters re-adjusted)" : "", f.rms * 1e3, lr));
+      if (lr <= best) continue;
+      best = lr;
+      start = p;
     }
-  }
+    ByteWriter bytes;
+    bytes.put(best);
+    bytes.put(start);
+    return bytes.bytes();
+  };
   // A candidate without parameters of its own (the discretisation) has no score and
   // no linearisation: one run of its model at the nominal fit says whether the tracks
   // move beyond the noise, S = ‖r_fine − r‖²/σ̂² against χ²(α/m, 1). When they do, the
@@ -653,36 +702,71 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // shaken bar the change's part the nominal parameters cannot absorb predicted
   // 0.205 mm with them refitted, three Gauss–Newton steps reached 0.17, the refit 0.010
   // (the coarse fit's ν 4.4 against the fine mesh's 20).
-  std::vector<int> model_checks;  // unscreened candidates whose model moves the tracks
-  for (int c = static_cast<int>(all.size()); c < m && !stopped(); ++c) {
+  std::vector<int> checked;  // the unscreened candidates
+  for (int c = static_cast<int>(all.size()); c < m && !stopped(); ++c) checked.push_back(c);
+  // Its model at the nominal fit, on this rank alone: what it moves the tracks by.
+  const auto check = [&](int c, const ProgressLine&) {
     const Candidate& cand = d.candidates[c];
-    Model model =
-        load_model(d.scenario, nominal, {&cand}, false, (models / (slug(cand) + ".yaml")).string());
+    Model model = load_model(d.scenario, nominal, {&cand}, false,
+                             (models / (slug(cand) + ".yaml")).string(), -1, serial_communicator());
     const ParameterMap& map = model.problem->map();
     bool same = map.size() == n_nominal;
     for (int j = 0; same && j < n_nominal; ++j) same = map.label(j) == base_map.label(j);
-    RankedCandidate rc;
-    rc.candidate = c;
-    rc.marginal.name = slug(cand);
-    rc.marginal.rms_before = d.nominal_train.rms;
-    rc.threshold = chi_square_quantile(d.settings.alpha / m, 1);
-    rc.marginal.error = same ? "" : "its parameters differ from the nominal model's";
+    std::string error = same ? "" : "its parameters differ from the nominal model's";
+    double statistic = 0, rms = 0;
     if (same) {
       const MisfitFigures f = misfit(*model.problem, p_nominal, o.interrupt);
       if (!f.ok)
-        rc.marginal.error = f.error;
+        error = f.error;
       else if (f.residual.size() != d.nominal_train.residual.size())
-        rc.marginal.error = "its markers see other samples than the nominal's";
+        error = "its markers see other samples than the nominal's";
       else {
-        rc.marginal.statistic = (f.residual - d.nominal_train.residual).squaredNorm() / sigma2;
-        rc.marginal.predicted_rms = f.rms;
-        rc.significant = rc.marginal.statistic > rc.threshold;
-        probe_start[c] = p_nominal;
-        if (rc.significant) model_checks.push_back(c);
+        statistic = (f.residual - d.nominal_train.residual).squaredNorm() / sigma2;
+        rms = f.rms;
       }
     }
+    ByteWriter bytes;
+    bytes.put(error);
+    bytes.put(statistic);
+    bytes.put(rms);
+    return bytes.bytes();
+  };
+  const int n_probed = static_cast<int>(probed.size());
+  const std::vector<std::string> runs = spread_tasks(
+      world(), n_probed + static_cast<int>(checked.size()),
+      [&](int k, const ProgressLine& line) {
+        return k < n_probed ? probe(probed[k], line) : check(checked[k - n_probed], line);
+      },
+      o.progress, o.interrupt);
+  for (int k = 0; k < n_probed; ++k) {
+    ByteReader in(runs[k]);
+    double best = 0;
+    Eigen::VectorXd start;
+    in.get(best);
+    in.get(start);
+    if (start.size() == 0) continue;
+    marginal[probed[k]].statistic = best;
+    probe_start[probed[k]] = start;
+  }
+  std::vector<int> model_checks;  // unscreened candidates whose model moves the tracks
+  for (std::size_t k = 0; k < checked.size(); ++k) {
+    const int c = checked[k];
+    RankedCandidate rc;
+    rc.candidate = c;
+    rc.marginal.name = slug(d.candidates[c]);
+    rc.marginal.rms_before = d.nominal_train.rms;
+    rc.threshold = chi_square_quantile(d.settings.alpha / m, 1);
+    ByteReader in(runs[n_probed + k]);
+    in.get(rc.marginal.error);
+    in.get(rc.marginal.statistic);
+    in.get(rc.marginal.predicted_rms);
+    if (rc.marginal.error.empty()) {
+      rc.significant = rc.marginal.statistic > rc.threshold;
+      probe_start[c] = p_nominal;
+      if (rc.significant) model_checks.push_back(c);
+    }
     say(fmt::format(
-        "  {:<22} {}", slug(cand),
+        "  {:<22} {}", rc.marginal.name,
         rc.marginal.error.empty()
             ? fmt::format("moves the tracks by {:.1f}σ̂² at the nominal fit (threshold {:.1f}, "
                           "rms there {:.4f} mm){}",
@@ -691,6 +775,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
             : "not judged: " + rc.marginal.error));
     d.ranking.order.push_back(rc);
   }
+  d.seconds.screening += since(t0);  // the probes and the model checks
   // Refit by the marginal statistic: the greedy order credits an effect once, but
   // which of two confounded ones to refit is the refit's question.
   const auto strength = [&](int c) {
@@ -727,9 +812,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                             static_cast<int>(model_checks.size()) +
                             (d.settings.learned_correction ? 1 : 0);
   say(fmt::format(
-      "stage 3: refits of the top {} candidates ({} cleared the screening threshold){}", K, passing,
+      "stage 3: refits of the top {} candidates ({} cleared the screening threshold){}{}", K,
+      passing,
       model_checks.empty() ? std::string()
-                           : fmt::format(", and of {} model check(s)", model_checks.size())));
+                           : fmt::format(", and of {} model check(s)", model_checks.size()),
+      force_wanted ? "; the missing force beside them" : ""));
   // The linearised start p0 (a Gauss–Newton step from the nominal) can overshoot
   // far past the valley it points into (V06: 8.55 mm from a nominal of 0.95 mm, and
   // the refit spent its budget coming back): halve the step until it beats the
@@ -738,11 +825,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // after its nominal fit started its anisotropy refit at the unchecked step: 9.13 mm
   // against the nominal's 1.37).
   const auto linearised_start = [&](Model& model, const Eigen::VectorXd& p0,
-                                    const Eigen::VectorXd& nominal_p, const std::string& name) {
+                                    const Eigen::VectorXd& nominal_p, const std::string& name,
+                                    const ProgressLine& say) {
     if ((o.resume && fs::exists(state / (name + ".csv"))) || (p0 - nominal_p).norm() == 0)
       return p0;
     Eigen::VectorXd p = p0;
-    for (int halving = 0; halving <= 3 && !stopped(); ++halving) {
+    for (int halving = 0; halving <= 3 && !stopped_here(); ++halving) {
       const MisfitFigures at = misfit(*model.problem, p, o.interrupt);
       if (at.ok && at.sum_sq < d.nominal_train.sum_sq) {
         if (halving > 0)
@@ -754,7 +842,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       }
       p = nominal_p + 0.5 * (p - nominal_p);
     }
-    if (stopped()) return nominal_p;
+    if (stopped_here()) return nominal_p;
     say(
         fmt::format("  {}: the linearised start and its halvings are worse than the nominal; "
                     "starting at the nominal",
@@ -762,15 +850,18 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     return nominal_p;
   };
   // One candidate's refit with the nominal parameters free, from `start(model,
-  // entries)` (the candidate's entries of the model's map), and its held-out checks.
+  // entries)` (the candidate's entries of the model's map), and its held-out checks,
+  // on this rank alone. `saved` is what a finished fit leaves to save (empty when
+  // nothing), `heldout_seconds` the time of the held-out checks.
   using Start = std::function<Eigen::VectorXd(Model&, const std::vector<int>&)>;
-  const auto refit = [&](int c, const Start& start) {
+  const auto refit = [&](int c, const Start& start, const ProgressLine& say, Eigen::VectorXd& saved,
+                         double& heldout_seconds) {
     const Candidate& cand = d.candidates[c];
     RefitResult res;
     res.candidate = c;
     const std::string name = slug(cand);
-    Model model =
-        load_model(d.scenario, nominal, {&cand}, false, (models / (name + ".yaml")).string());
+    Model model = load_model(d.scenario, nominal, {&cand}, false,
+                             (models / (name + ".yaml")).string(), -1, serial_communicator());
     const ParameterMap& map = model.problem->map();
     const std::vector<int> entries = entries_of(model, model.extended.candidate_specs[0]);
     res.dof = static_cast<int>(entries.size());
@@ -782,14 +873,15 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       return p;
     };
     const double refit_ftol = precision(d.nominal_train.residual, d.noise.sigma);
-    const Eigen::VectorXd p_start = linearised_start(model, p0, nested_nominal(), name);
-    FitRun fit = fit_model(model, p_start, (state / (name + ".csv")).string(), o, name, refit_ftol,
-                           d.settings.refit_evaluations);
-    if (!fit.ok && !stopped()) {
+    const Eigen::VectorXd p_start = linearised_start(model, p0, nested_nominal(), name, say);
+    FitRun fit = fit_model(model, p_start, (state / (name + ".csv")).string(), o, say, name,
+                           refit_ftol, d.settings.refit_evaluations);
+    if (!fit.ok && !stopped_here()) {
       // The linearised start may lie where the model cannot run: from the nominal.
-      fit = fit_model(model, nested_nominal(), (state / (name + ".csv")).string(), o, name,
+      fit = fit_model(model, nested_nominal(), (state / (name + ".csv")).string(), o, say, name,
                       refit_ftol, d.settings.refit_evaluations);
     }
+    if (fit.finished) saved = fit.p;
     res.evaluations = fit.evaluations;
     if (!fit.ok) {
       res.error = fit.error;
@@ -828,16 +920,13 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       res.where = cand.where.empty() ? "clamp zone" : "clamp zone (" + cand.where + ")";
     else if (!cand.origin.empty())  // the user's word for where the effect acts
       res.where = cand.where;
-    const fs::path dir = out / "refits" / name;
-    model.problem->map().apply(fit.p, model.problem->experiment(0).model());
-    res.fitted_yaml = write_fitted_scenario(
-        *model.scenario, map, model.problem->experiment(0).model(), dir.string(), fit.p);
     // Held-out motions.
-    th = Clock::now();
+    const auto th = Clock::now();
     double spread = 0;
-    for (std::size_t k = 0; k < d.settings.validate.size() && !stopped(); ++k) {
+    for (std::size_t k = 0; k < d.settings.validate.size() && !stopped_here(); ++k) {
       Model h = load_model(d.settings.validate[k], nominal, {&cand}, false,
-                           (models / fmt::format("heldout{}-{}.yaml", k, name)).string());
+                           (models / fmt::format("heldout{}-{}.yaml", k, name)).string(), -1,
+                           serial_communicator());
       HeldOutFigures f = d.nominal_heldout[k];
       if (h.problem->map().size() != map.size()) {
         f.after.error = "its parameters do not match the training scenario's";
@@ -852,7 +941,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       }
       res.heldout.push_back(f);
     }
-    d.seconds.heldout += since(th);
+    heldout_seconds = since(th);
     res.heldout_threshold =
         2 * normal_quantile(d.settings.alpha / heldout_tests) * d.noise.sigma * std::sqrt(spread);
     res.passes_heldout = !res.heldout.empty() && res.heldout_drop > res.heldout_threshold;
@@ -870,9 +959,67 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                                       before * 1e6, after * 1e6, res.heldout_threshold * 1e6)));
     return res;
   };
-  for (int r = 0; r < K && !stopped(); ++r) {
-    const int c = order[r];
-    d.refits.push_back(refit(c, [&](Model& model, const std::vector<int>& entries) {
+  // The missing force of `problem` at p, fitted on this rank alone into outdir/`dir`:
+  // a task of spread_tasks, packed.
+  const auto missing_force_task = [&](FitProblem& problem, const Scenario& s,
+                                      const Eigen::VectorXd& p, const std::string& dir,
+                                      const ProgressLine& line) {
+    ByteWriter bytes;
+    put(bytes, fit_missing_force(problem, s, p, axis,
+                                 {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
+                                 (out / dir).string(), o.interrupt, line, serial_communicator()));
+    return bytes.bytes();
+  };
+  const auto unpacked_force = [](const std::string& bytes) {
+    MissingForce f;
+    ByteReader in(bytes);
+    get(in, f);
+    return f;
+  };
+  // A refit as a task of spread_tasks: packed, timed; not run ("") after an interrupt.
+  const auto refit_task = [&](int c, const Start& start, const ProgressLine& say) {
+    if (stopped_here()) return std::string();
+    const auto tr = Clock::now();
+    Eigen::VectorXd saved;
+    double heldout_seconds = 0;
+    RefitResult res = refit(c, start, say, saved, heldout_seconds);
+    res.seconds = since(tr);
+    ByteWriter bytes;
+    put(bytes, res);
+    bytes.put(saved);
+    bytes.put(heldout_seconds);
+    return bytes.bytes();
+  };
+  // A gathered refit, on every rank: rank 0 saves its parameters and writes its
+  // refitted scenario; its time counts to `stage`.
+  const auto take_refit = [&](const std::string& bytes, double& stage) {
+    if (bytes.empty()) return;
+    RefitResult res;
+    Eigen::VectorXd saved;
+    double heldout_seconds = 0;
+    ByteReader in(bytes);
+    get(in, res);
+    in.get(saved);
+    in.get(heldout_seconds);
+    const Candidate& cand = d.candidates[res.candidate];
+    const std::string name = slug(cand);
+    res.fitted_yaml = on_root([&] {
+      if (saved.size()) save_parameters((state / (name + ".csv")).string(), res.labels, saved);
+      if (!res.ok) return std::string();
+      Model model = load_model(d.scenario, nominal, {&cand}, false,
+                               (models / (name + ".yaml")).string(), -1, serial_communicator());
+      FemModel& fem = model.problem->experiment(0).model();
+      model.problem->map().apply(res.p, fem);
+      return write_fitted_scenario(*model.scenario, model.problem->map(), fem,
+                                   (out / "refits" / name).string(), res.p);
+    });
+    stage += res.seconds;
+    d.seconds.heldout += heldout_seconds;
+    d.refits.push_back(std::move(res));
+  };
+  // The start of a top candidate's refit: from its probe, or its screening step.
+  const auto screening_start = [&](int c) {
+    return [&, c](Model& model, const std::vector<int>& entries) {
       const ParameterMap& map = model.problem->map();
       if (probe_start.count(c)) return Eigen::VectorXd(probe_start.at(c));
       const CandidateScore& score = start_scores.count(c) ? start_scores.at(c) : marginal.at(c);
@@ -892,8 +1039,30 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         }
       }
       return p0;
-    }));
+    };
+  };
+  // The missing force of the nominal model needs none of the screening's results
+  // after the noise level, and no refit needs it: it runs beside the refits (task 0).
+  const int with_force = force_wanted && !stopped() ? 1 : 0;
+  const std::vector<std::string> stage3 = spread_tasks(
+      world(), with_force + K,
+      [&](int k, const ProgressLine& line) {
+        if (k >= with_force) {
+          const int c = order[k - with_force];
+          return refit_task(c, screening_start(c), line);
+        }
+        line(fmt::format("  missing force: {} knots in time × {} segments × 3 axes, {} evaluations",
+                         std::lround(mfs.knots_per_second * nominal.time.end), mfs.segments,
+                         mfs.evaluations));
+        return missing_force_task(*base.problem, nominal, p_nominal, "missing-force", line);
+      },
+      o.progress, o.interrupt);
+  if (with_force) {
+    d.missing_force = unpacked_force(stage3[0]);
+    say("  missing force: " + describe(d.missing_force));
+    d.seconds.missing_force = d.missing_force.seconds;
   }
+  for (int k = with_force; k < with_force + K; ++k) take_refit(stage3[k], d.seconds.refits);
   // ‖r‖²/(N − n) over σ̂² is an F ratio on N − n and M degrees of freedom (M third
   // differences), whose logarithm is about normal with variance 2/(N − n) + 2/M;
   // tested at α/m like every candidate (V01, no effect: 0.502 mm against σ̂ 0.492, a
@@ -918,17 +1087,28 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   for (const auto& x : d.refits)
     if (explained.empty() && passes(x) && !more_than_noise(x.train.sum_sq, n_nominal + x.dof))
       explained = slug(d.candidates[x.candidate]);
+  std::vector<int> checks;  // the model checks refitted
   for (int c : model_checks) {
     if (stopped()) break;
-    if (!explained.empty()) {
+    if (explained.empty())
+      checks.push_back(c);
+    else
       say(fmt::format("  {}: not refitted: {} leaves only noise", slug(d.candidates[c]),
                       explained));
-      continue;
-    }
-    d.refits.push_back(refit(
-        c, [&](Model&, const std::vector<int>&) { return Eigen::VectorXd(probe_start.at(c)); }));
   }
-  d.seconds.refits = since(t0);
+  for (const std::string& bytes : spread_tasks(
+           world(), static_cast<int>(checks.size()),
+           [&](int k, const ProgressLine&say) {
+             const int c = checks[k];
+             return refit_task(
+                 c,
+                 [&](Model&, const std::vector<int>&) {
+                   return Eigen::VectorXd(probe_start.at(c));
+                 },
+                 say);
+           },
+           o.progress, o.interrupt))
+    take_refit(bytes, d.seconds.refits);
 
   // ---- Verdict -------------------------------------------------------------------
   for (int r = 0; r < static_cast<int>(d.refits.size()); ++r) {
@@ -948,7 +1128,6 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   const bool something_missing =
       above_noise || (d.missing_force.ok && d.missing_force.statistic > d.missing_force.threshold);
   if (d.accepted < 0 && d.settings.learned_correction && something_missing && !stopped()) {
-    t0 = Clock::now();
     say(fmt::format(
         "stage 5: no named candidate explains the gap (nominal ‖r‖² {:.2f}× the noise's): "
         "a learned stress correction",
@@ -959,23 +1138,29 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     // values, and L-BFGS from zero crawls along their weakly coupled directions (12
     // evaluations took a bulk-modulus error a tenth of the way). The minimum-norm
     // step leaves the values the data do not see at 0.
-    RefitResult res = refit(c, [&](Model& model, const std::vector<int>&) {
+    const Start start = [&](Model& model, const std::vector<int>&) {
       Eigen::VectorXd p0 = model.problem->map().initial();
       p0.head(n_nominal) = p_nominal;
       if (o.resume && fs::exists(state / "unnamed.csv")) return p0;  // the refit is saved
       const GaussNewtonSystem gn = gauss_newton_system(*model.problem, p0, o.interrupt);
       if (gn.ok) p0 -= gn.jacobian.completeOrthogonalDecomposition().solve(gn.residual);
       return p0;
-    });
-    if (res.ok) {
-      d.signature = correction_signature(nominal, res.parameters);
-      say("  signature: " + d.signature.summary);
+    };
+    take_refit(
+        spread_tasks(
+            world(), 1, [&](int, const ProgressLine& line) { return refit_task(c, start, line); },
+            o.progress, o.interrupt)[0],
+        d.seconds.learned_correction);
+    if (!d.refits.empty() && d.refits.back().candidate == c) {  // run, not interrupted first
+      const RefitResult& res = d.refits.back();
+      if (res.ok) {
+        d.signature = correction_signature(nominal, res.parameters);
+        say("  signature: " + d.signature.summary);
+      }
+      d.learned = static_cast<int>(d.refits.size()) - 1;
+      if (res.ok && res.passes_training && (!judged_on_heldout || res.passes_heldout))
+        d.accepted = d.learned;
     }
-    d.refits.push_back(res);
-    d.learned = static_cast<int>(d.refits.size()) - 1;
-    if (res.ok && res.passes_training && (!judged_on_heldout || res.passes_heldout))
-      d.accepted = d.learned;
-    d.seconds.learned_correction = since(t0);
   }
   if (d.accepted >= 0) {
     const RefitResult& a = d.refits[d.accepted];
@@ -1058,20 +1243,24 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
             "cannot hold fixed",
             d.effect);
       } else {
-        d.remaining_force =
-            fit_missing_force(*with.problem, *with.scenario, x.p, axis,
-                              {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
-                              (out / "missing-force-after").string(), o.interrupt, o.progress);
+        d.remaining_force = unpacked_force(spread_tasks(
+            world(), 1,
+            [&](int, const ProgressLine& line) {
+              return missing_force_task(*with.problem, *with.scenario, x.p, "missing-force-after",
+                                        line);
+            },
+            o.progress, o.interrupt)[0]);
       }
       say("  missing force left: " + describe(d.remaining_force));
       d.seconds.missing_force += since(tf);
     }
   } else {
     // The nominal model is the answer: its fitted scenario is the one to run.
-    FemModel& model = base.problem->experiment(0).model();
-    base_map.apply(p_nominal, model);
-    d.fitted_yaml =
-        write_fitted_scenario(*base.scenario, base_map, model, (out / "nominal").string());
+    d.fitted_yaml = on_root([&] {
+      FemModel& model = base.problem->experiment(0).model();
+      base_map.apply(p_nominal, model);
+      return write_fitted_scenario(*base.scenario, base_map, model, (out / "nominal").string());
+    });
   }
   d.interrupted = stopped();
   return d;

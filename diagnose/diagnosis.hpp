@@ -56,7 +56,7 @@ struct RefitResult {
   bool ok = false;
   std::string error;
   int evaluations = 0;
-  double seconds = 0;
+  double seconds = 0;    // of the refit and its held-out checks
   MisfitFigures train;   // after (the nominal's is Diagnosis::nominal_train)
   double statistic = 0;  // (‖r₀‖² − ‖r‖²) / σ̂²: likelihood ratio, known noise
   double threshold = 0;  // χ²(dof) quantile at α / refits
@@ -79,6 +79,8 @@ struct RefitResult {
   std::vector<std::string> labels;  // of p
 };
 
+/// Seconds spent on each stage. The missing force and the refits (with their held-out
+/// checks) are the sums of their own runs', which run side by side under MPI.
 struct StageTimes {
   double nominal_fit = 0, missing_force = 0, screening = 0, refits = 0, heldout = 0,
          second_screening = 0, learned_correction = 0;

@@ -6,17 +6,19 @@
 #include <set>
 #include <utility>
 
+#include "adjoint/result_exchange.hpp"
 #include "base/error.hpp"
+#include "base/spread_tasks.hpp"
 
 namespace kelvin {
 
 Model load_model(const std::string& source, const Scenario& nominal,
                  const std::vector<const Candidate*>& with, bool screening, const std::string& path,
-                 int refit_form) {
+                 int refit_form, Communicator& comm) {
   Model m;
   m.extended = write_extended_scenario(source, nominal, with, screening, path, refit_form);
   m.scenario = std::make_unique<Scenario>(load_scenario(path));
-  m.problem = std::make_unique<FitProblem>(*m.scenario, m.scenario->fit.parameters);
+  m.problem = std::make_unique<FitProblem>(*m.scenario, m.scenario->fit.parameters, comm);
   // The stages read residuals per marker, frame and frequency band of captured motion.
   if (m.problem->num_static_terms() > 0)
     throw Error(fmt::format(
@@ -52,7 +54,8 @@ Part load_part(const Model& joint, const std::string& source, const Scenario& no
     if (c == refit_form) form = static_cast<int>(list.size());
     list.push_back(with[c]);
   }
-  Part part{load_model(source, nominal, list, true, path, form), {}};
+  // Each part runs on one rank (screening_system spreads them).
+  Part part{load_model(source, nominal, list, true, path, form, serial_communicator()), {}};
   const ExtendedScenario& here = part.model.extended;
   const ExtendedScenario& there = joint.extended;
   const auto pair_up = [&](const std::vector<int>& a, const std::vector<int>& b) {
@@ -76,7 +79,8 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const Scenario& nominal,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
-                                   const std::string& stem, const std::atomic<bool>* interrupt) {
+                                   const std::string& stem, const std::atomic<bool>* interrupt,
+                                   Communicator& comm) {
   if (m.extended.candidate_specs.size() != with.size())
     throw Error(fmt::format("internal: the screening model has {} candidates, the list {}",
                             m.extended.candidate_specs.size(), with.size()));
@@ -90,50 +94,76 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     (c == refit_form || !moves_model ? base : own).push_back(c);
   }
 
-  GaussNewtonSystem g;
   const auto run = [&](Part& part, const std::vector<int>* sensitivity_entries) {
     Eigen::VectorXd q = part.model.problem->map().initial();
     for (const auto& [here, there] : part.entries) q[here] = p[there];
     return gauss_newton_system(*part.model.problem, q, interrupt, true, sensitivity_entries);
   };
-  Part b =
-      load_part(m, source, nominal, with, base, refit_form, (dir / (stem + "-base.yaml")).string());
-  const GaussNewtonSystem gb = run(b, nullptr);
-  if (!gb.ok) return gb;
-  g.residual = gb.residual;
-  g.samples = gb.samples;
-  g.rtol = gb.rtol;
-  g.jacobian = Eigen::MatrixXd::Zero(gb.residual.size(), m.problem->map().size());
-  for (const auto& [here, there] : b.entries) g.jacobian.col(there) = gb.jacobian.col(here);
+  // Run 0 is the base; run k its k-th own candidate. Each returns its system with
+  // the joint model's index of every column (−1: a column that stays zero).
+  const auto part_run = [&](int k, const ProgressLine&) {
+    std::vector<int> picked = base;
+    std::string file = stem + "-base";
+    if (k > 0) {
+      const int c = own[k - 1];
+      picked = {c};
+      if (refit_form >= 0) picked.insert(picked.begin(), refit_form);
+      file = fmt::format("{}-{}{}", stem, with[c]->id,
+                         with[c]->where.empty() ? "" : "-" + with[c]->where);
+    }
+    Part part =
+        load_part(m, source, nominal, with, picked, refit_form, (dir / (file + ".yaml")).string());
+    // A candidate's run integrates its own entries only: the base's columns are
+    // known already.
+    std::vector<int> mine;
+    if (k > 0)
+      mine = entries_of(part.model, part.model.extended.candidate_specs[picked.size() - 1]);
+    const GaussNewtonSystem gk = run(part, k > 0 ? &mine : nullptr);
+    const std::set<int> own_entries(mine.begin(), mine.end());
+    Eigen::VectorXd column_of = Eigen::VectorXd::Constant(gk.jacobian.cols(), -1);
+    for (const auto& [here, there] : part.entries)
+      if (k == 0 || own_entries.count(here)) column_of[here] = there;
+    ByteWriter out;
+    put(out, gk);
+    out.put(column_of);
+    return out.bytes();
+  };
+  const std::vector<std::string> runs =
+      spread_tasks(comm, 1 + static_cast<int>(own.size()), part_run, nullptr, interrupt);
 
-  for (int c : own) {
-    std::vector<int> picked = {c};
-    if (refit_form >= 0) picked.insert(picked.begin(), refit_form);
-    Part part = load_part(m, source, nominal, with, picked, refit_form,
-                          (dir / fmt::format("{}-{}{}.yaml", stem, with[c]->id,
-                                             with[c]->where.empty() ? "" : "-" + with[c]->where))
-                              .string());
-    // Its own entries only: the base's columns are known already.
-    const std::vector<int> mine =
-        entries_of(part.model, part.model.extended.candidate_specs[picked.size() - 1]);
-    const GaussNewtonSystem gc = run(part, &mine);
-    if (!gc.ok) {
-      g.error = fmt::format("{} (screening {})", gc.error, with[c]->id);
+  GaussNewtonSystem g;
+  for (int k = 0; k < static_cast<int>(runs.size()); ++k) {
+    GaussNewtonSystem gk;
+    Eigen::VectorXd column_of;
+    ByteReader in(runs[k]);
+    get(in, gk);
+    in.get(column_of);
+    if (!gk.ok) {
+      g.error =
+          k == 0 ? gk.error : fmt::format("{} (screening {})", gk.error, with[own[k - 1]]->id);
       return g;
     }
-    // The same samples in the same order, or the columns would land on wrong rows.
-    bool same = gc.samples.size() == g.samples.size();
-    for (std::size_t i = 0; same && i < g.samples.size(); ++i)
-      same = gc.samples[i].experiment == g.samples[i].experiment &&
-             gc.samples[i].marker == g.samples[i].marker &&
-             gc.samples[i].axis == g.samples[i].axis && gc.samples[i].t == g.samples[i].t;
-    if (!same)
-      throw Error(fmt::format("internal: screening {} sampled other residuals than the base model",
-                              with[c]->id));
-    g.rtol = std::max(g.rtol, gc.rtol);
-    const std::set<int> own_entries(mine.begin(), mine.end());
-    for (const auto& [here, there] : part.entries)
-      if (own_entries.count(here)) g.jacobian.col(there) = gc.jacobian.col(here);
+    if (k == 0) {
+      g.residual = gk.residual;
+      g.samples = gk.samples;
+      g.rtol = gk.rtol;
+      g.jacobian = Eigen::MatrixXd::Zero(gk.residual.size(), m.problem->map().size());
+    } else {
+      // The same samples in the same order, or the columns would land on wrong rows.
+      bool same = gk.samples.size() == g.samples.size();
+      for (std::size_t i = 0; same && i < g.samples.size(); ++i)
+        same = gk.samples[i].experiment == g.samples[i].experiment &&
+               gk.samples[i].marker == g.samples[i].marker &&
+               gk.samples[i].axis == g.samples[i].axis && gk.samples[i].t == g.samples[i].t;
+      if (!same)
+        throw Error(
+            fmt::format("internal: screening {} sampled other residuals than the base model",
+                        with[own[k - 1]]->id));
+      g.rtol = std::max(g.rtol, gk.rtol);
+    }
+    for (long here = 0; here < column_of.size(); ++here)
+      if (column_of[here] >= 0)
+        g.jacobian.col(static_cast<long>(column_of[here])) = gk.jacobian.col(here);
   }
   g.ok = true;
   return g;

@@ -24,10 +24,11 @@ struct Model {
 };
 
 /// Writes `path` from `source` extended by `with` (see write_extended_scenario) and
-/// loads it. Static measurements are refused: the stages read captured motion.
+/// loads it, its experiments spread over `comm`. Static measurements are refused: the
+/// stages read captured motion.
 Model load_model(const std::string& source, const Scenario& nominal,
                  const std::vector<const Candidate*>& with, bool screening, const std::string& path,
-                 int refit_form = -1);
+                 int refit_form = -1, Communicator& comm = world());
 
 /// The entries of m's map that fit.parameters specs `specs` make, in order.
 std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
@@ -43,10 +44,13 @@ std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
 /// run integrates its own sensitivities only: in a joint run every candidate's terms
 /// would slow every step of every sensitivity. The per-candidate models are written
 /// to `dir`/`stem`-<id>.yaml. `m` must have been made from `with` and `refit_form`.
+/// The runs are spread over the ranks of `comm` (each on its rank alone); every rank
+/// gets the whole system.
 GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const Scenario& nominal,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
-                                   const std::string& stem, const std::atomic<bool>* interrupt);
+                                   const std::string& stem, const std::atomic<bool>* interrupt,
+                                   Communicator& comm = world());
 
 }  // namespace kelvin

@@ -62,7 +62,8 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
                                const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
                                const MissingForceNoise& noise, const MissingForceSettings& settings,
                                const std::string& dir, const std::atomic<bool>* interrupt,
-                               const std::function<void(const std::string&)>& progress) {
+                               const std::function<void(const std::string&)>& progress,
+                               Communicator& comm) {
   const auto t0 = std::chrono::steady_clock::now();
   MissingForce mf;
   fs::create_directories(dir);
@@ -113,7 +114,7 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
 
   try {
     const Scenario s = load_scenario(path);
-    FitProblem force(s, s.fit.parameters);
+    FitProblem force(s, s.fit.parameters, comm);
     mf.dof = force.map().size();
     mf.threshold = chi_square_quantile(noise.alpha, mf.dof);
     // Both ends are measured at the scenario's tolerances, the stages' being coarser.

@@ -50,11 +50,13 @@ struct MissingForceNoise {
 
 /// Fits the field to `nominal` (the training scenario) at its fitted parameters
 /// p_nominal of `problem` and judges it; writes the scenarios it fits and the
-/// field's files (body-force.csv, body-force.pvd) into `dir`.
+/// field's files (body-force.csv, body-force.pvd) into `dir`. The field's fit runs on
+/// `comm` (its one experiment on rank 0).
 MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
                                const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
                                const MissingForceNoise& noise, const MissingForceSettings& settings,
                                const std::string& dir, const std::atomic<bool>* interrupt,
-                               const std::function<void(const std::string&)>& progress);
+                               const std::function<void(const std::string&)>& progress,
+                               Communicator& comm = world());
 
 }  // namespace kelvin

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <filesystem>
 
+#include "base/communicator.hpp"
 #include "base/error.hpp"
 #include "diagnose/diagnosis.hpp"
 #include "diagnose/diagnosis_outputs.hpp"
@@ -20,12 +21,35 @@ struct DiagnoseArgs {
   bool resume = false, quiet = false;
 };
 
+/// Prints an error every rank met alike once (by rank 0).
+void print_error(const std::string& message) {
+  if (world().root()) fmt::print(stderr, "error: {}\n", message);
+}
+
 int run(const DiagnoseArgs& args) {
+  // Under MPI every rank runs the diagnosis; its independent runs (the screening's,
+  // the probes, the refits, the missing force) are spread over the ranks and shared,
+  // so all take the same path. Rank 0 prints and writes the outputs.
+  Communicator& comm = world();
   const std::string outdir =
       args.outdir.empty() ? std::filesystem::path(args.scenario).stem().string() + "-diagnosis"
                           : args.outdir;
-  if (const std::string why = prepare_output_dir(outdir); !why.empty()) {
-    fmt::print(stderr, "error: {}\n", why);
+  if (const std::string why = first_message(comm, comm.root() ? prepare_output_dir(outdir) : "");
+      !why.empty()) {
+    print_error(why);
+    return kExitInputError;
+  }
+  // Every rank reads the scenarios; one that cannot ends them all, with its message.
+  std::string failed;
+  try {
+    load_scenario(args.scenario);
+    for (const std::string& path : load_diagnose_settings(args.scenario).validate)
+      load_scenario(path);
+  } catch (const Error& e) {
+    failed = e.what();
+  }
+  if (const std::string why = first_message(comm, failed); !why.empty()) {
+    print_error(why);
     return kExitInputError;
   }
   report_crashes(fmt::format("the stages done so far are in {}; continue with: kelvin diagnose "
@@ -36,7 +60,7 @@ int run(const DiagnoseArgs& args) {
   o.resume = args.resume;
   o.max_evaluations = args.max_evaluations;
   o.interrupt = &g_interrupted;
-  if (!args.quiet)
+  if (!args.quiet && comm.root())
     // A stage's first line says when it began, so the log shows where the time went.
     o.progress = [start = std::chrono::steady_clock::now()](const std::string& line) {
       if (line.rfind("stage ", 0) == 0)
@@ -50,20 +74,26 @@ int run(const DiagnoseArgs& args) {
   try {
     d = run_diagnosis(args.scenario, outdir, o);
   } catch (const Error& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    print_error(e.what());
     return kExitInputError;
   }
-  try {
-    const std::string report = write_diagnosis_outputs(d);
-    fmt::print("verdict: {}{}; report: {}\n", d.effect,
-               d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")", report);
-  } catch (const Error& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+  std::string report;
+  failed.clear();
+  if (comm.root()) try {
+      report = write_diagnosis_outputs(d);
+    } catch (const std::exception& e) {
+      failed = e.what();
+    }
+  if (const std::string why = first_message(comm, failed); !why.empty()) {
+    print_error(why);
     return kExitRunFailed;
   }
+  fmt::print("verdict: {}{}; report: {}\n", d.effect,
+             d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")", report);
   if (d.interrupted) {
-    fmt::print(stderr, "interrupted; continue with: kelvin diagnose {} -o {} --resume\n",
-               args.scenario, outdir);
+    if (comm.root())
+      fmt::print(stderr, "interrupted; continue with: kelvin diagnose {} -o {} --resume\n",
+                 args.scenario, outdir);
     return kExitInterrupted;
   }
   return kExitOk;

@@ -43,12 +43,12 @@ void on_signal(int) {
 }
 
 #ifdef KELVIN_MPI
-/// The commands that run across ranks (`fit`); any other runs on one rank only.
+/// The commands that run across ranks (`fit`, `diagnose`); any other runs on one rank.
 bool runs_across_ranks(int argc, char** argv, std::string& command) {
   for (int i = 1; i < argc; ++i)
     if (argv[i][0] != '-') {
       command = argv[i];
-      return command == "fit";
+      return command == "fit" || command == "diagnose";
     }
   return true;  // --help, --version
 }
@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
   if (std::string command; comm.size() > 1 && !runs_across_ranks(argc, argv, command)) {
     if (comm.root())
       std::fprintf(stderr,
-                   "error: kelvin-mpi runs `fit` across ranks; run `%s` on one rank "
+                   "error: kelvin-mpi runs `fit` and `diagnose` across ranks; run `%s` on one rank "
                    "(mpirun -np 1, or the serial kelvin)\n",
                    command.c_str());
     return kelvin::kExitInputError;

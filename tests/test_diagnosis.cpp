@@ -19,6 +19,7 @@
 #include "diagnose/extended_scenario.hpp"
 #include "diagnose/learned_correction.hpp"
 #include "diagnose/noise.hpp"
+#include "diagnosis_fixture.hpp"
 #include "engine/csv.hpp"
 #include "test_support.hpp"
 #include "yaml/scenario.hpp"
@@ -27,6 +28,10 @@ namespace kelvin {
 namespace {
 
 namespace fs = std::filesystem;
+using test::bar;
+using test::diagnosis_case;
+using test::kNominal;
+using test::kWithDrag;
 
 // White noise under a smooth model error 6× its size, with gaps: the third
 // differences see the noise, ‖r‖ sees both.
@@ -143,26 +148,6 @@ TEST(DiagnoseSettings, BadEntriesAreRefusedWithTheirPlace) {
   EXPECT_NE(c.custom[0].place.find("custom.yaml:4:7: diagnose.custom[0]"), std::string::npos)
       << c.custom[0].place;
   EXPECT_EQ(c.candidates, (std::vector<std::string>{"drag", "fibres_x"}));
-}
-
-const std::string kNominal = R"(  density: 1100
-  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 0.8e5 }
-  viscous: { model: newtonian, nu: 30 })";
-
-// Captured at 1 kHz: the noise estimate assumes the model error is slow against the
-// frame rate (it cancels (2π f Δt)³ of it), and the bar is shaken at 13 and 17 Hz.
-std::string bar(const std::string& material, const std::string& tail, double end = 0.1,
-                const std::string& mesh_keys = "", const std::string& solver_keys = "") {
-  test::ShakenBar b;
-  b.mesh_keys = mesh_keys;
-  b.solver_keys = solver_keys;
-  b.material = material;
-  b.end = end;
-  b.output_rate = 1000;
-  b.rtol = 1e-7;
-  b.atol = 1e-11;
-  b.tail = tail;
-  return test::shaken_bar_yaml(b);
 }
 
 /// The nominal bar fitting μ and ν to noiseless tracks of `truth` (dir/nominal.yaml).
@@ -328,57 +313,6 @@ TEST(LearnedCorrection, AtZeroChangesNothingAndItsSignatureReadsTheValues) {
   EXPECT_NE(sig.summary.find("s > 1: stiffer"), std::string::npos) << sig.summary;
   EXPECT_NE(sig.summary.find("J < 1: softer"), std::string::npos) << sig.summary;
 }
-
-/// A diagnosis scenario for the shaken bar whose tracks came from `truth` (with
-/// noise), a held-out motion of the same bar at other frequencies.
-fs::path diagnosis_case(const fs::path& dir, const std::string& truth, unsigned seed,
-                        const std::string& candidates = "stiffening, drag, sync_lag, marker_offset",
-                        const std::string& more = "", bool truth_refined = false) {
-  // The specimen's own discretisation: the same box, each tetrahedron split into
-  // eight (a truth the nominal mesh cannot reach).
-  const std::string mesh_keys = truth_refined ? ", refine: 1" : "";
-  const std::string solver_keys;
-  const std::string train = test::noisy_tracks(
-      test::simulate_tracks(dir, "truth-train",
-                            bar(truth, test::kShakenBarMarkers, 0.1, mesh_keys, solver_keys)),
-      dir / "train.csv", 1e-5, seed);
-  test::ShakenBar h;
-  h.mesh_keys = mesh_keys;
-  h.solver_keys = solver_keys;
-  h.material = truth;
-  h.end = 0.1;
-  h.output_rate = 1000;
-  h.rtol = 1e-7;
-  h.atol = 1e-11;
-  h.frequency_y = 11;
-  h.frequency_z = 19;
-  h.amplitude_y = 0.002;
-  h.amplitude_z = 0.003;
-  h.tail = test::kShakenBarMarkers;
-  const std::string held =
-      test::noisy_tracks(test::simulate_tracks(dir, "truth-heldout", test::shaken_bar_yaml(h)),
-                         dir / "heldout.csv", 1e-5, seed + 1);
-  h.material = kNominal;
-  h.mesh_keys = h.solver_keys = "";
-  h.tail = test::kShakenBarMarkers + "\n  observed: " + held + "\n";
-  test::write_text(dir / "heldout.yaml", test::shaken_bar_yaml(h));
-  test::write_text(dir / "train.yaml",
-                   bar(kNominal, test::kShakenBarMarkers + "\n  observed: " + train +
-                                     "\nfit:\n  parameters: [elastic.mu, viscous.nu]\n"
-                                     "  max_evaluations: 30\ndiagnose:\n  candidates: [" +
-                                     candidates +
-                                     "]\n  refits: 2\n"
-                                     "  validate: [heldout.yaml]\n" +
-                                     more));
-  return dir / "train.yaml";
-}
-
-// The truth of the drag tests: the nominal bar in air that drags it (−cρv).
-const std::string kWithDrag = R"(  density: 1100
-  elastic: { model: neo-hookean, lambda: 2.0e5, mu: 1.0e5 }
-  viscous:
-    - { model: newtonian, nu: 20 }
-    - { model: drag, c: 40 })";
 
 TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
   const fs::path dir = test::scratch("diagnosis-drag");

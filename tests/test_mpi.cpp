@@ -5,6 +5,7 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
+#include "base/spread_tasks.hpp"
 #include "fit/fit_loop.hpp"
 #include "mpi_fixture.hpp"
 #include "parallel/mpi_communicator.hpp"
@@ -140,6 +141,72 @@ TEST(Mpi, AnInterruptOnOneRankStopsTheEvaluationOnBoth) {
   EXPECT_TRUE(ev.interrupted);
   EXPECT_TRUE(g_interrupted);  // rank 0's flag, raised through Communicator::interrupt
   EXPECT_FALSE(ev.ok);
+  g_interrupted = false;
+}
+
+// Tasks 0..4 on two ranks: 0, 2, 4 on rank 0, 1 and 3 on rank 1; each rank gets all
+// five results in task order, and rank 0 prints rank 1's lines once they arrive.
+TEST(Mpi, SpreadTasksGiveEveryRankEveryResultInTaskOrder) {
+  std::vector<int> ran;
+  std::vector<std::string> printed;
+  const std::vector<std::string> results = spread_tasks(
+      world(), 5,
+      [&](int k, const ProgressLine& say) {
+        ran.push_back(k);
+        say(fmt::format("task {} on rank {}", k, world().rank()));
+        return fmt::format("result {}", k);
+      },
+      [&](const std::string& line) { printed.push_back(line); }, nullptr);
+  ASSERT_EQ(results.size(), 5u);
+  for (int k = 0; k < 5; ++k) EXPECT_EQ(results[k], fmt::format("result {}", k));
+  EXPECT_EQ(ran, world().root() ? std::vector<int>({0, 2, 4}) : std::vector<int>({1, 3}));
+  if (world().root())
+    EXPECT_EQ(printed,
+              std::vector<std::string>({"task 0 on rank 0", "task 2 on rank 0", "task 4 on rank 0",
+                                        "task 1 on rank 1", "task 3 on rank 1"}));
+  else
+    EXPECT_TRUE(printed.empty());
+}
+
+// Task 1 (rank 1) throws: both ranks throw its message, and rank 1 runs none of its
+// later tasks (a serial run would have stopped there).
+TEST(Mpi, ATaskThatThrowsOnOneRankEndsBothWithItsMessage) {
+  std::vector<int> ran;
+  std::string message;
+  try {
+    spread_tasks(
+        world(), 4,
+        [&](int k, const ProgressLine&) {
+          ran.push_back(k);
+          if (k == 1) throw Error("motion1.yaml: cannot read");
+          return std::string();
+        },
+        nullptr, nullptr);
+  } catch (const Error& e) {
+    message = e.what();
+  }
+  EXPECT_EQ(message, "motion1.yaml: cannot read");
+  EXPECT_EQ(ran, world().root() ? std::vector<int>({0, 2}) : std::vector<int>({1}));
+}
+
+// An interrupt that reaches rank 1 alone during the tasks is raised on rank 0 too, and
+// the agreed check says so on both.
+TEST(Mpi, AnInterruptDuringTheTasksOfOneRankIsRaisedOnBoth) {
+  g_interrupted = false;
+  spread_tasks(
+      world(), 2,
+      [&](int k, const ProgressLine&) {
+        if (k == 1) g_interrupted = true;
+        return std::string();
+      },
+      nullptr, &g_interrupted);
+  EXPECT_TRUE(g_interrupted.load());
+  EXPECT_TRUE(any_interrupted(world(), g_interrupted.load()));
+  g_interrupted = false;
+  // Set on rank 1 only, between collectives: the agreed check raises it on rank 0.
+  if (!world().root()) g_interrupted = true;
+  EXPECT_TRUE(any_interrupted(world(), g_interrupted.load()));
+  EXPECT_TRUE(g_interrupted.load());
   g_interrupted = false;
 }
 
