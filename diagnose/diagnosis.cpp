@@ -11,6 +11,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "adjoint/fit_problem.hpp"
@@ -1177,9 +1178,32 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     if (!where.empty()) d.verdict_where.push_back(where);
     // Screen again with the accepted effect in the model, at its refit (after the
     // unnamed one, every named candidate has been refitted and failed already).
+    // How far it shrinks, as a force: the missing force of the model with the effect,
+    // fitted beside the second screening (neither needs the other).
+    const RefitResult& x = d.refits[d.accepted];
+    std::optional<Model> accepted;
+    BesideTask remaining{nullptr, o.progress, ""};
+    if (d.settings.missing_force.enabled && mfs.knots_per_second > 0 && !stopped()) {
+      accepted = load_model(d.scenario, nominal, {&d.candidates[x.candidate]}, false,
+                            (models / "accepted.yaml").string());
+      if (!accepted->problem->map().observation_blocks().empty())
+        // The field is fitted to a scenario file holding the model at its refit, and
+        // a clock offset, marker offset or registration has no place in one yet.
+        d.remaining_force.error = fmt::format(
+            "not computed: {} is a parameter of the observation, which a scenario file "
+            "cannot hold fixed",
+            d.effect);
+      else
+        remaining.run = [&](int, const ProgressLine& line) {
+          return missing_force_task(*accepted->problem, *accepted->scenario, x.p,
+                                    "missing-force-after", line);
+        };
+    }
+    bool beside = false;  // the field was fitted beside the second screening
     if (!stopped() && d.accepted != d.learned) {
       t0 = Clock::now();
-      say(fmt::format("stage 4: screening again with {} in the model", d.effect));
+      say(fmt::format("stage 4: screening again with {} in the model{}", d.effect,
+                      remaining.run ? "; the missing force left beside it" : ""));
       std::vector<const Candidate*> with = {&d.candidates[a.candidate]};
       std::vector<int> others;
       for (int c = 0; c < static_cast<int>(d.candidates.size()); ++c)
@@ -1196,8 +1220,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       if (!same) throw Error("internal: the second screening's parameters differ from the refit's");
       Eigen::VectorXd p2 = amap.initial();
       p2.head(n_fixed) = a.p;
-      const GaussNewtonSystem g2 = screening_system(again, d.scenario, nominal, with, 0, p2, models,
-                                                    "screening-with-effect", o.interrupt);
+      const GaussNewtonSystem g2 =
+          screening_system(again, d.scenario, nominal, with, 0, p2, models, "screening-with-effect",
+                           o.interrupt, world(), remaining.run ? &remaining : nullptr);
+      beside = static_cast<bool>(remaining.run);
       if (g2.ok) {
         std::vector<std::pair<std::string, std::vector<int>>> groups2;
         ScreeningOptions so2;
@@ -1228,32 +1254,17 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       }
       d.seconds.second_screening = since(t0);
     }
-    // How far it shrinks, as a force: the missing force of the model with the effect.
-    if (d.settings.missing_force.enabled && mfs.knots_per_second > 0 && !stopped()) {
-      const auto tf = Clock::now();
+    if (remaining.run && !beside) {
       say(fmt::format("stage 4: the missing force left with {} in the model", d.effect));
-      const RefitResult& x = d.refits[d.accepted];
-      Model with = load_model(d.scenario, nominal, {&d.candidates[x.candidate]}, false,
-                              (models / "accepted.yaml").string());
-      if (!with.problem->map().observation_blocks().empty()) {
-        // The field is fitted to a scenario file holding the model at its refit, and
-        // a clock offset, marker offset or registration has no place in one yet.
-        d.remaining_force.error = fmt::format(
-            "not computed: {} is a parameter of the observation, which a scenario file "
-            "cannot hold fixed",
-            d.effect);
-      } else {
-        d.remaining_force = unpacked_force(spread_tasks(
-            world(), 1,
-            [&](int, const ProgressLine& line) {
-              return missing_force_task(*with.problem, *with.scenario, x.p, "missing-force-after",
-                                        line);
-            },
-            o.progress, o.interrupt)[0]);
-      }
-      say("  missing force left: " + describe(d.remaining_force));
-      d.seconds.missing_force += since(tf);
+      remaining.result = spread_tasks(world(), 1, remaining.run, o.progress, o.interrupt)[0];
     }
+    if (!remaining.result.empty()) {
+      d.remaining_force = unpacked_force(remaining.result);
+      d.seconds.missing_force += d.remaining_force.seconds;
+      // On one rank the field's fit ran within the stage's time.
+      if (beside && world().size() == 1) d.seconds.second_screening -= d.remaining_force.seconds;
+    }
+    if (accepted) say("  missing force left: " + describe(d.remaining_force));
   } else {
     // The nominal model is the answer: its fitted scenario is the one to run.
     d.fitted_yaml = on_root([&] {

@@ -80,7 +80,7 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
                                    const std::string& stem, const std::atomic<bool>* interrupt,
-                                   Communicator& comm) {
+                                   Communicator& comm, BesideTask* beside) {
   if (m.extended.candidate_specs.size() != with.size())
     throw Error(fmt::format("internal: the screening model has {} candidates, the list {}",
                             m.extended.candidate_specs.size(), with.size()));
@@ -128,8 +128,19 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     out.put(column_of);
     return out.bytes();
   };
-  const std::vector<std::string> runs =
-      spread_tasks(comm, 1 + static_cast<int>(own.size()), part_run, nullptr, interrupt);
+  // `beside` first: the longest task goes to rank 0, the base run (the longest of
+  // the screening's) to the next.
+  const int first = beside ? 1 : 0;
+  std::vector<std::string> runs = spread_tasks(
+      comm, first + 1 + static_cast<int>(own.size()),
+      [&](int k, const ProgressLine& line) {
+        return k < first ? beside->run(k, line) : part_run(k - first, line);
+      },
+      beside ? beside->progress : nullptr, interrupt);
+  if (first) {
+    beside->result = std::move(runs.front());
+    runs.erase(runs.begin());
+  }
 
   GaussNewtonSystem g;
   for (int k = 0; k < static_cast<int>(runs.size()); ++k) {

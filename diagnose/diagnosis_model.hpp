@@ -12,6 +12,7 @@
 
 #include "adjoint/fit_problem.hpp"
 #include "adjoint/uncertainty.hpp"
+#include "base/spread_tasks.hpp"
 #include "diagnose/extended_scenario.hpp"
 
 namespace kelvin {
@@ -45,12 +46,18 @@ std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
 /// would slow every step of every sensitivity. The per-candidate models are written
 /// to `dir`/`stem`-<id>.yaml. `m` must have been made from `with` and `refit_form`.
 /// The runs are spread over the ranks of `comm` (each on its rank alone); every rank
-/// gets the whole system.
+/// gets the whole system. `beside`, when given, is spread with them: work of another
+/// stage that needs none of them.
+struct BesideTask {
+  SpreadTask run;
+  ProgressLine progress;  // of its lines
+  std::string result;     // packed, on every rank
+};
 GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const Scenario& nominal,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
                                    const std::string& stem, const std::atomic<bool>* interrupt,
-                                   Communicator& comm = world());
+                                   Communicator& comm = world(), BesideTask* beside = nullptr);
 
 }  // namespace kelvin
