@@ -1,9 +1,10 @@
 #pragma once
 /// \file
-/// Independent tasks spread over the ranks of a communicator: task k runs on rank
-/// k mod size alone (whatever it simulates, on a serial communicator), and every rank
+/// Independent tasks spread over the ranks of a communicator: each task runs on one
+/// rank alone (whatever it simulates, on a serial communicator), and every rank
 /// receives every task's packed result, in task order. The ranks then go on together
 /// with the numbers a serial run computes task after task.
+#include <algorithm>
 #include <atomic>
 #include <exception>
 #include <functional>
@@ -21,19 +22,46 @@ using ProgressLine = std::function<void(const std::string&)>;
 /// Task k: its result packed (ByteWriter::bytes()), its progress lines through `say`.
 using SpreadTask = std::function<std::string(int k, const ProgressLine& say)>;
 
-/// Collective. A task's progress lines are printed as they come on rank 0 and, for
-/// the tasks of other ranks, by rank 0 in task order once they are gathered. The
+/// The rank of each task: costliest first to the least loaded rank (the lowest on a
+/// tie), when every cost is known (> 0) — costs every rank holds alike, so that all
+/// compute the same assignment — else task k on rank k mod size.
+inline std::vector<int> task_ranks(const std::vector<double>& costs, int size) {
+  std::vector<int> rank(costs.size());
+  const bool known = std::all_of(costs.begin(), costs.end(), [](double c) { return c > 0; });
+  if (!known) {
+    for (std::size_t k = 0; k < costs.size(); ++k) rank[k] = static_cast<int>(k) % size;
+    return rank;
+  }
+  std::vector<std::size_t> order(costs.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return costs[a] > costs[b]; });
+  std::vector<double> load(static_cast<std::size_t>(size), 0.0);
+  for (std::size_t k : order) {
+    const auto least = std::min_element(load.begin(), load.end()) - load.begin();
+    rank[k] = static_cast<int>(least);
+    load[static_cast<std::size_t>(least)] += costs[k];
+  }
+  return rank;
+}
+
+/// Collective: task k runs on rank ranks[k] (k mod size when `ranks` is not one per
+/// task). A task's progress lines are printed as they come on rank 0 and, for the
+/// tasks of other ranks, by rank 0 in task order once they are gathered. The
 /// first task (in task order) that threw has its message rethrown on every rank —
 /// a kelvin::Error as one, anything else as std::runtime_error — and an interrupt
 /// seen on any rank is raised on all (Communicator::interrupt), so no rank waits for
 /// one that stopped and all take the same path afterwards.
 inline std::vector<std::string> spread_tasks(Communicator& comm, int n, const SpreadTask& task,
                                              const ProgressLine& progress,
-                                             const std::atomic<bool>* interrupt) {
+                                             const std::atomic<bool>* interrupt,
+                                             std::vector<int> ranks = {}) {
   const int size = comm.size();
+  if (static_cast<int>(ranks.size()) != n) ranks = task_ranks(std::vector<double>(n, 0.0), size);
   ByteWriter mine;
   bool failed = false;  // a rank's tasks after one that threw are not run, as in serial
-  for (int k = comm.rank(); k < n; k += size) {
+  for (int k = 0; k < n; ++k) {
+    if (ranks[k] != comm.rank()) continue;
     std::vector<std::string> lines;
     const ProgressLine say = [&](const std::string& line) {
       if (!comm.root())
@@ -67,7 +95,7 @@ inline std::vector<std::string> spread_tasks(Communicator& comm, int n, const Sp
   std::string error;
   bool input_error = false;
   for (int k = 0; k < n; ++k) {
-    ByteReader& in = from[static_cast<std::size_t>(k % size)];
+    ByteReader& in = from[static_cast<std::size_t>(ranks[k])];
     std::string message;
     bool input = false;
     long count = 0;
@@ -78,7 +106,7 @@ inline std::vector<std::string> spread_tasks(Communicator& comm, int n, const Sp
     for (long i = 0; i < count; ++i) {
       std::string line;
       in.get(line);
-      if (comm.root() && progress) progress(line);
+      if (comm.root() && progress) progress(line);  // (none from rank 0's own tasks)
     }
     if (error.empty() && !message.empty()) {
       error = message;

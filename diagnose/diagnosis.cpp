@@ -278,7 +278,8 @@ void predict_heldout_drops(Diagnosis& d, const std::vector<int>& order,
                            const std::map<int, Eigen::VectorXd>& probe_start,
                            const std::vector<const Candidate*>& all, const ParameterMap& smap,
                            const Eigen::VectorXd& p_screen, int n_nominal, const Scenario& nominal,
-                           const fs::path& models, const DiagnoseOptions& o) {
+                           const fs::path& models, const DiagnoseOptions& o,
+                           ScreeningCosts& costs) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<int> passed;
   for (int c : order)
@@ -298,9 +299,9 @@ void predict_heldout_drops(Diagnosis& d, const std::vector<int>& order,
     bool same = hmap.size() == smap.size();
     for (int j = 0; same && j < smap.size(); ++j) same = hmap.label(j) == smap.label(j);
     if (!same) return fail(path + ": its candidates' parameters differ from the training's");
-    const GaussNewtonSystem g =
-        screening_system(h, path, nominal, all, -1, p_screen, models,
-                         fmt::format("heldout{}-screening", k), o.interrupt);
+    const GaussNewtonSystem g = screening_system(h, path, nominal, all, -1, p_screen, models,
+                                                 fmt::format("heldout{}-screening", k), o.interrupt,
+                                                 world(), nullptr, &costs);
     if (!g.ok) return fail(path + ": " + g.error);
     const std::vector<int> fitted = range(n_nominal);
     for (int c : passed) {
@@ -504,8 +505,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                       j, smap.label(j), base_map.label(j)));
   Eigen::VectorXd p_screen = smap.initial();
   p_screen.head(n_nominal) = p_nominal;
-  const GaussNewtonSystem g = screening_system(screen, d.scenario, nominal, all, -1, p_screen,
-                                               models, "screening", o.interrupt);
+  // The seconds of each screening run, which balance the ranks in the next ones.
+  ScreeningCosts screening_costs;
+  const GaussNewtonSystem g =
+      screening_system(screen, d.scenario, nominal, all, -1, p_screen, models, "screening",
+                       o.interrupt, world(), nullptr, &screening_costs);
   if (!g.ok) throw Error(fmt::format("the screening run failed: {}", g.error));
   d.noise = estimate_noise(g.residual, g.samples);
   d.nominal_train.ok = true;
@@ -796,7 +800,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                     "motions choose (each one's screening step, predicted there)",
                     passing, d.settings.refits));
     predict_heldout_drops(d, order, marginal, threshold, probe_start, all, smap, p_screen,
-                          n_nominal, nominal, models, o);
+                          n_nominal, nominal, models, o, screening_costs);
     d.seconds.heldout += since(th);
     std::vector<int> passed, rest;
     for (int c : order) (std::isfinite(d.predicted_heldout_drop[c]) ? passed : rest).push_back(c);
@@ -1220,9 +1224,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       if (!same) throw Error("internal: the second screening's parameters differ from the refit's");
       Eigen::VectorXd p2 = amap.initial();
       p2.head(n_fixed) = a.p;
-      const GaussNewtonSystem g2 =
-          screening_system(again, d.scenario, nominal, with, 0, p2, models, "screening-with-effect",
-                           o.interrupt, world(), remaining.run ? &remaining : nullptr);
+      const GaussNewtonSystem g2 = screening_system(
+          again, d.scenario, nominal, with, 0, p2, models, "screening-with-effect", o.interrupt,
+          world(), remaining.run ? &remaining : nullptr, &screening_costs);
       beside = static_cast<bool>(remaining.run);
       if (g2.ok) {
         std::vector<std::pair<std::string, std::vector<int>>> groups2;

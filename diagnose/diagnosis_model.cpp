@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <chrono>
 #include <set>
 #include <utility>
 
@@ -80,7 +81,7 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
                                    const std::string& stem, const std::atomic<bool>* interrupt,
-                                   Communicator& comm, BesideTask* beside) {
+                                   Communicator& comm, BesideTask* beside, ScreeningCosts* costs) {
   if (m.extended.candidate_specs.size() != with.size())
     throw Error(fmt::format("internal: the screening model has {} candidates, the list {}",
                             m.extended.candidate_specs.size(), with.size()));
@@ -100,19 +101,22 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     return gauss_newton_system(*part.model.problem, q, interrupt, true, sensitivity_entries);
   };
   // Run 0 is the base; run k its k-th own candidate. Each returns its system with
-  // the joint model's index of every column (−1: a column that stays zero).
+  // the joint model's index of every column (−1: a column that stays zero) and the
+  // seconds it took.
+  const auto key = [&](int k) {
+    if (k == 0) return std::string("base");
+    const Candidate& c = *with[own[k - 1]];
+    return c.where.empty() ? c.id : c.id + "-" + c.where;
+  };
   const auto part_run = [&](int k, const ProgressLine&) {
+    const auto t0 = std::chrono::steady_clock::now();
     std::vector<int> picked = base;
-    std::string file = stem + "-base";
     if (k > 0) {
-      const int c = own[k - 1];
-      picked = {c};
+      picked = {own[k - 1]};
       if (refit_form >= 0) picked.insert(picked.begin(), refit_form);
-      file = fmt::format("{}-{}{}", stem, with[c]->id,
-                         with[c]->where.empty() ? "" : "-" + with[c]->where);
     }
-    Part part =
-        load_part(m, source, nominal, with, picked, refit_form, (dir / (file + ".yaml")).string());
+    Part part = load_part(m, source, nominal, with, picked, refit_form,
+                          (dir / (stem + "-" + key(k) + ".yaml")).string());
     // A candidate's run integrates its own entries only: the base's columns are
     // known already.
     std::vector<int> mine;
@@ -126,17 +130,21 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     ByteWriter out;
     put(out, gk);
     out.put(column_of);
+    out.put(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     return out.bytes();
   };
-  // `beside` first: the longest task goes to rank 0, the base run (the longest of
-  // the screening's) to the next.
-  const int first = beside ? 1 : 0;
+  // Without known costs, `beside` first: it (often the longest) goes to rank 0, the
+  // base run (the longest of the screening's) to the next.
+  const int first = beside ? 1 : 0, n = first + 1 + static_cast<int>(own.size());
+  std::vector<double> expected(static_cast<std::size_t>(n), 0.0);
+  for (int k = first; k < n && costs && !beside; ++k)
+    if (const auto at = costs->find(key(k - first)); at != costs->end()) expected[k] = at->second;
   std::vector<std::string> runs = spread_tasks(
-      comm, first + 1 + static_cast<int>(own.size()),
+      comm, n,
       [&](int k, const ProgressLine& line) {
         return k < first ? beside->run(k, line) : part_run(k - first, line);
       },
-      beside ? beside->progress : nullptr, interrupt);
+      beside ? beside->progress : nullptr, interrupt, task_ranks(expected, comm.size()));
   if (first) {
     beside->result = std::move(runs.front());
     runs.erase(runs.begin());
@@ -146,9 +154,12 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
   for (int k = 0; k < static_cast<int>(runs.size()); ++k) {
     GaussNewtonSystem gk;
     Eigen::VectorXd column_of;
+    double seconds = 0;
     ByteReader in(runs[k]);
     get(in, gk);
     in.get(column_of);
+    in.get(seconds);
+    if (costs) (*costs)[key(k)] = seconds;
     if (!gk.ok) {
       g.error =
           k == 0 ? gk.error : fmt::format("{} (screening {})", gk.error, with[own[k - 1]]->id);

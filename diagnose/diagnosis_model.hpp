@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <atomic>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -47,17 +48,23 @@ std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
 /// to `dir`/`stem`-<id>.yaml. `m` must have been made from `with` and `refit_form`.
 /// The runs are spread over the ranks of `comm` (each on its rank alone); every rank
 /// gets the whole system. `beside`, when given, is spread with them: work of another
-/// stage that needs none of them.
+/// stage that needs none of them. With `costs` holding every run's seconds from an
+/// earlier screening and no `beside` (whose cost is not known on that scale: V09's
+/// runs took 4–5× longer at the refit than at the nominal fit), the runs are balanced
+/// by them, else dealt round robin; each run's seconds are put there.
 struct BesideTask {
   SpreadTask run;
   ProgressLine progress;  // of its lines
   std::string result;     // packed, on every rank
 };
+/// Seconds of each screening run: "base", or a candidate's id (-where).
+using ScreeningCosts = std::map<std::string, double>;
 GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                                    const Scenario& nominal,
                                    const std::vector<const Candidate*>& with, int refit_form,
                                    const Eigen::VectorXd& p, const std::filesystem::path& dir,
                                    const std::string& stem, const std::atomic<bool>* interrupt,
-                                   Communicator& comm = world(), BesideTask* beside = nullptr);
+                                   Communicator& comm = world(), BesideTask* beside = nullptr,
+                                   ScreeningCosts* costs = nullptr);
 
 }  // namespace kelvin
