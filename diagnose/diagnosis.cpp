@@ -94,10 +94,17 @@ std::string on_root(const std::function<std::string()>& write) {
   return value;
 }
 
-/// The saved parameters when they are for this map, else empty.
-Eigen::VectorXd load_parameters(const std::string& path, const ParameterMap& map) {
+/// A state file's text ("" when there is none).
+std::string read_state(const std::string& path) {
   std::ifstream in(path);
-  if (!in) return {};
+  std::ostringstream text;
+  if (in) text << in.rdbuf();
+  return text.str();
+}
+
+/// The parameters a state file's text holds when they are for this map, else empty.
+Eigen::VectorXd saved_parameters(const std::string& text, const ParameterMap& map) {
+  std::istringstream in(text);
   std::string line;
   std::getline(in, line);
   Eigen::VectorXd p(map.size());
@@ -124,15 +131,16 @@ struct FitRun {
   std::string error;
 };
 
-/// Fits m from p0 (or reads the parameters a finished fit saved at `state`, on
-/// --resume); progress lines go through `say`.
+/// Fits m from p0, or takes the parameters `saved` (the text of the state file
+/// `state` a finished fit left, "" when none) on --resume; progress lines go through
+/// `say`.
 FitRun fit_model(Model& m, const Eigen::VectorXd& p0, const std::string& state,
-                 const DiagnoseOptions& o, const ProgressLine& say, const std::string& label,
-                 double ftol_rel, int max_evaluations = 0) {
+                 const std::string& saved, const DiagnoseOptions& o, const ProgressLine& say,
+                 const std::string& label, double ftol_rel, int max_evaluations = 0) {
   FitRun run;
   const ParameterMap& map = m.problem->map();
   if (o.resume) {
-    run.p = load_parameters(state, map);
+    run.p = saved_parameters(saved, map);
     if (run.p.size() == map.size()) {
       run.ok = run.resumed = true;
       if (say) say(fmt::format("  {}: resumed from {}", label, state));
@@ -381,7 +389,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // rank where they go on together (a SIGINT reaches them at different moments).
   const auto stopped_here = [&] { return o.interrupt && o.interrupt->load(); };
   const auto stopped = [&] { return any_interrupted(world(), stopped_here()); };
-  const fs::path out(outdir), state = out / "state", models = out / "models";
+  // The models are written and read back by every rank: each in its own folder, so
+  // that no two ranks replace one file.
+  const fs::path out(outdir),
+      state = out / "state",
+      models =
+          world().root() ? out / "models" : out / "models" / fmt::format("rank{}", world().rank());
   fs::create_directories(state);
   fs::create_directories(models);
 
@@ -440,8 +453,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   };
   const std::string nominal_state = (state / "nominal.csv").string();
   Eigen::VectorXd p_start = base_map.initial();
+  // Read on rank 0: every rank must take the same branch.
+  const std::string nominal_saved =
+      o.resume ? on_root([&] { return read_state(nominal_state); }) : "";
   const bool resumable =
-      o.resume && load_parameters(nominal_state, base_map).size() == base_map.size();
+      o.resume && saved_parameters(nominal_saved, base_map).size() == base_map.size();
   // Before any fit, so that a user's candidate that cannot be used costs little.
   for (const auto& c : d.candidates)
     if (!c.origin.empty() && !stopped() && !resumable)
@@ -470,8 +486,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       nominal_ftol = precision(g0.residual, n0.sigma);
     }
   }
-  const FitRun nominal_fit =
-      fit_model(base, p_start, nominal_state, o, o.progress, "nominal", nominal_ftol);
+  const FitRun nominal_fit = fit_model(base, p_start, nominal_state, nominal_saved, o, o.progress,
+                                       "nominal", nominal_ftol);
   if (!nominal_fit.ok) throw Error(fmt::format("the nominal fit failed: {}", nominal_fit.error));
   if (nominal_fit.finished)
     on_root([&] {
@@ -669,7 +685,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     else
       for (double sign : {-1.0, 1.0})
         values.push_back(std::clamp(p0[j] + sign * size, map.lower()[j], map.upper()[j]));
-    double best = marginal[c].statistic;
+    double best = marginal.at(c).statistic;
     Eigen::VectorXd start;
     for (double value : values) {
       if (stopped_here() || value == p0[j]) continue;
@@ -711,6 +727,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   for (int c = static_cast<int>(all.size()); c < m && !stopped(); ++c) checked.push_back(c);
   // Its model at the nominal fit, on this rank alone: what it moves the tracks by.
   const auto check = [&](int c, const ProgressLine&) {
+    if (stopped_here()) return std::string();  // not judged, not listed
     const Candidate& cand = d.candidates[c];
     Model model = load_model(d.scenario, nominal, {&cand}, false,
                              (models / (slug(cand) + ".yaml")).string(), -1, serial_communicator());
@@ -756,6 +773,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   std::vector<int> model_checks;  // unscreened candidates whose model moves the tracks
   for (std::size_t k = 0; k < checked.size(); ++k) {
     const int c = checked[k];
+    if (runs[n_probed + k].empty()) continue;
     RankedCandidate rc;
     rc.candidate = c;
     rc.marginal.name = slug(d.candidates[c]);
@@ -856,10 +874,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   };
   // One candidate's refit with the nominal parameters free, from `start(model,
   // entries)` (the candidate's entries of the model's map), and its held-out checks,
-  // on this rank alone. `saved` is what a finished fit leaves to save (empty when
-  // nothing), `heldout_seconds` the time of the held-out checks.
+  // on this rank alone, which saves the fit's parameters as soon as it has ended (the
+  // ranks' state files are theirs: --resume needs them on one file system);
+  // `heldout_seconds` the time of the held-out checks.
   using Start = std::function<Eigen::VectorXd(Model&, const std::vector<int>&)>;
-  const auto refit = [&](int c, const Start& start, const ProgressLine& say, Eigen::VectorXd& saved,
+  const auto refit = [&](int c, const Start& start, const ProgressLine& say,
                          double& heldout_seconds) {
     const Candidate& cand = d.candidates[c];
     RefitResult res;
@@ -879,14 +898,16 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     };
     const double refit_ftol = precision(d.nominal_train.residual, d.noise.sigma);
     const Eigen::VectorXd p_start = linearised_start(model, p0, nested_nominal(), name, say);
-    FitRun fit = fit_model(model, p_start, (state / (name + ".csv")).string(), o, say, name,
-                           refit_ftol, d.settings.refit_evaluations);
+    const std::string saved_at = (state / (name + ".csv")).string(),
+                      saved = o.resume ? read_state(saved_at) : "";
+    FitRun fit = fit_model(model, p_start, saved_at, saved, o, say, name, refit_ftol,
+                           d.settings.refit_evaluations);
     if (!fit.ok && !stopped_here()) {
       // The linearised start may lie where the model cannot run: from the nominal.
-      fit = fit_model(model, nested_nominal(), (state / (name + ".csv")).string(), o, say, name,
-                      refit_ftol, d.settings.refit_evaluations);
+      fit = fit_model(model, nested_nominal(), saved_at, saved, o, say, name, refit_ftol,
+                      d.settings.refit_evaluations);
     }
-    if (fit.finished) saved = fit.p;
+    if (fit.finished) save_parameters(saved_at, labels_of(map), fit.p);
     res.evaluations = fit.evaluations;
     if (!fit.ok) {
       res.error = fit.error;
@@ -964,15 +985,17 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                                       before * 1e6, after * 1e6, res.heldout_threshold * 1e6)));
     return res;
   };
-  // The missing force of `problem` at p, fitted on this rank alone into outdir/`dir`:
-  // a task of spread_tasks, packed.
+  // The missing force of `problem` at p, fitted on this rank alone into outdir/`dir`
+  // and summed up in a line that starts with `what`: a task of spread_tasks, packed.
   const auto missing_force_task = [&](FitProblem& problem, const Scenario& s,
                                       const Eigen::VectorXd& p, const std::string& dir,
-                                      const ProgressLine& line) {
+                                      const std::string& what, const ProgressLine& line) {
+    const MissingForce f = fit_missing_force(
+        problem, s, p, axis, {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
+        (out / dir).string(), o.interrupt, line, serial_communicator());
+    line(fmt::format("  {}: {}", what, describe(f)));
     ByteWriter bytes;
-    put(bytes, fit_missing_force(problem, s, p, axis,
-                                 {d.noise.sigma, d.nominal_train.samples, d.settings.alpha}, mfs,
-                                 (out / dir).string(), o.interrupt, line, serial_communicator()));
+    put(bytes, f);
     return bytes.bytes();
   };
   const auto unpacked_force = [](const std::string& bytes) {
@@ -985,31 +1008,26 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   const auto refit_task = [&](int c, const Start& start, const ProgressLine& say) {
     if (stopped_here()) return std::string();
     const auto tr = Clock::now();
-    Eigen::VectorXd saved;
     double heldout_seconds = 0;
-    RefitResult res = refit(c, start, say, saved, heldout_seconds);
+    RefitResult res = refit(c, start, say, heldout_seconds);
     res.seconds = since(tr);
     ByteWriter bytes;
     put(bytes, res);
-    bytes.put(saved);
     bytes.put(heldout_seconds);
     return bytes.bytes();
   };
-  // A gathered refit, on every rank: rank 0 saves its parameters and writes its
-  // refitted scenario; its time counts to `stage`.
+  // A gathered refit, on every rank: rank 0 writes its refitted scenario; its time
+  // counts to `stage`.
   const auto take_refit = [&](const std::string& bytes, double& stage) {
     if (bytes.empty()) return;
     RefitResult res;
-    Eigen::VectorXd saved;
     double heldout_seconds = 0;
     ByteReader in(bytes);
     get(in, res);
-    in.get(saved);
     in.get(heldout_seconds);
     const Candidate& cand = d.candidates[res.candidate];
     const std::string name = slug(cand);
     res.fitted_yaml = on_root([&] {
-      if (saved.size()) save_parameters((state / (name + ".csv")).string(), res.labels, saved);
       if (!res.ok) return std::string();
       Model model = load_model(d.scenario, nominal, {&cand}, false,
                                (models / (name + ".yaml")).string(), -1, serial_communicator());
@@ -1059,12 +1077,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         line(fmt::format("  missing force: {} knots in time × {} segments × 3 axes, {} evaluations",
                          std::lround(mfs.knots_per_second * nominal.time.end), mfs.segments,
                          mfs.evaluations));
-        return missing_force_task(*base.problem, nominal, p_nominal, "missing-force", line);
+        return missing_force_task(*base.problem, nominal, p_nominal, "missing-force",
+                                  "missing force", line);
       },
       o.progress, o.interrupt);
   if (with_force) {
     d.missing_force = unpacked_force(stage3[0]);
-    say("  missing force: " + describe(d.missing_force));
     d.seconds.missing_force = d.missing_force.seconds;
   }
   for (int k = with_force; k < with_force + K; ++k) take_refit(stage3[k], d.seconds.refits);
@@ -1156,7 +1174,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
             world(), 1, [&](int, const ProgressLine& line) { return refit_task(c, start, line); },
             o.progress, o.interrupt)[0],
         d.seconds.learned_correction);
-    if (!d.refits.empty() && d.refits.back().candidate == c) {  // run, not interrupted first
+    if (d.refits.empty() || d.refits.back().candidate != c) {
+      d.candidates.pop_back();  // interrupted before it began
+    } else {
       const RefitResult& res = d.refits.back();
       if (res.ok) {
         d.signature = correction_signature(nominal, res.parameters);
@@ -1189,7 +1209,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     BesideTask remaining{nullptr, o.progress, ""};
     if (d.settings.missing_force.enabled && mfs.knots_per_second > 0 && !stopped()) {
       accepted = load_model(d.scenario, nominal, {&d.candidates[x.candidate]}, false,
-                            (models / "accepted.yaml").string());
+                            (models / "accepted.yaml").string(), -1, serial_communicator());
       if (!accepted->problem->map().observation_blocks().empty())
         // The field is fitted to a scenario file holding the model at its refit, and
         // a clock offset, marker offset or registration has no place in one yet.
@@ -1200,7 +1220,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       else
         remaining.run = [&](int, const ProgressLine& line) {
           return missing_force_task(*accepted->problem, *accepted->scenario, x.p,
-                                    "missing-force-after", line);
+                                    "missing-force-after", "missing force left", line);
         };
     }
     bool beside = false;  // the field was fitted beside the second screening
@@ -1258,7 +1278,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       }
       d.seconds.second_screening = since(t0);
     }
-    if (remaining.run && !beside) {
+    if (remaining.run && !beside && !stopped()) {
       say(fmt::format("stage 4: the missing force left with {} in the model", d.effect));
       remaining.result = spread_tasks(world(), 1, remaining.run, o.progress, o.interrupt)[0];
     }
@@ -1268,7 +1288,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       // On one rank the field's fit ran within the stage's time.
       if (beside && world().size() == 1) d.seconds.second_screening -= d.remaining_force.seconds;
     }
-    if (accepted) say("  missing force left: " + describe(d.remaining_force));
+    if (accepted && remaining.result.empty())  // (else its task said it)
+      say("  missing force left: " + describe(d.remaining_force));
   } else {
     // The nominal model is the answer: its fitted scenario is the one to run.
     d.fitted_yaml = on_root([&] {

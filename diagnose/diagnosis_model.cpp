@@ -101,15 +101,24 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     return gauss_newton_system(*part.model.problem, q, interrupt, true, sensitivity_entries);
   };
   // Run 0 is the base; run k its k-th own candidate. Each returns its system with
-  // the joint model's index of every column (−1: a column that stays zero) and the
-  // seconds it took.
+  // the columns it fills and their index in the joint model, and the seconds it took.
   const auto key = [&](int k) {
     if (k == 0) return std::string("base");
     const Candidate& c = *with[own[k - 1]];
     return c.where.empty() ? c.id : c.id + "-" + c.where;
   };
+  bool failed = false;  // a run failed on this rank: its later ones are not needed
   const auto part_run = [&](int k, const ProgressLine&) {
     const auto t0 = std::chrono::steady_clock::now();
+    ByteWriter out;
+    if (failed) {
+      GaussNewtonSystem skipped;
+      skipped.error = "not run";
+      put(out, skipped);
+      out.put(Eigen::VectorXd());
+      out.put(0.0);
+      return out.bytes();
+    }
     std::vector<int> picked = base;
     if (k > 0) {
       picked = {own[k - 1]};
@@ -122,12 +131,20 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     std::vector<int> mine;
     if (k > 0)
       mine = entries_of(part.model, part.model.extended.candidate_specs[picked.size() - 1]);
-    const GaussNewtonSystem gk = run(part, k > 0 ? &mine : nullptr);
+    GaussNewtonSystem gk = run(part, k > 0 ? &mine : nullptr);
+    failed = !gk.ok;
+    // Only the columns it fills, each with its index in the joint model.
     const std::set<int> own_entries(mine.begin(), mine.end());
-    Eigen::VectorXd column_of = Eigen::VectorXd::Constant(gk.jacobian.cols(), -1);
+    std::vector<std::pair<int, int>> kept;
     for (const auto& [here, there] : part.entries)
-      if (k == 0 || own_entries.count(here)) column_of[here] = there;
-    ByteWriter out;
+      if (gk.ok && (k == 0 || own_entries.count(here))) kept.emplace_back(here, there);
+    Eigen::MatrixXd columns(gk.jacobian.rows(), static_cast<long>(kept.size()));
+    Eigen::VectorXd column_of(static_cast<long>(kept.size()));
+    for (std::size_t i = 0; i < kept.size(); ++i) {
+      columns.col(static_cast<long>(i)) = gk.jacobian.col(kept[i].first);
+      column_of[static_cast<long>(i)] = kept[i].second;
+    }
+    gk.jacobian = std::move(columns);
     put(out, gk);
     out.put(column_of);
     out.put(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
@@ -159,7 +176,7 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
     get(in, gk);
     in.get(column_of);
     in.get(seconds);
-    if (costs) (*costs)[key(k)] = seconds;
+    if (costs && seconds > 0) (*costs)[key(k)] = seconds;
     if (!gk.ok) {
       g.error =
           k == 0 ? gk.error : fmt::format("{} (screening {})", gk.error, with[own[k - 1]]->id);
@@ -183,9 +200,8 @@ GaussNewtonSystem screening_system(const Model& m, const std::string& source,
                         with[own[k - 1]]->id));
       g.rtol = std::max(g.rtol, gk.rtol);
     }
-    for (long here = 0; here < column_of.size(); ++here)
-      if (column_of[here] >= 0)
-        g.jacobian.col(static_cast<long>(column_of[here])) = gk.jacobian.col(here);
+    for (long i = 0; i < column_of.size(); ++i)
+      g.jacobian.col(static_cast<long>(column_of[i])) = gk.jacobian.col(i);
   }
   g.ok = true;
   return g;

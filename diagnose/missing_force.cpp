@@ -56,15 +56,13 @@ double frame_spacing(const Scenario& s) {
   return dt[dt.size() / 2];
 }
 
-}  // namespace
-
-MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
-                               const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
-                               const MissingForceNoise& noise, const MissingForceSettings& settings,
-                               const std::string& dir, const std::atomic<bool>* interrupt,
-                               const std::function<void(const std::string&)>& progress,
-                               Communicator& comm) {
-  const auto t0 = std::chrono::steady_clock::now();
+/// fit_missing_force but for the seconds it took.
+MissingForce fit_field(FitProblem& problem, const Scenario& nominal,
+                       const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
+                       const MissingForceNoise& noise, const MissingForceSettings& settings,
+                       const std::string& dir, const std::atomic<bool>* interrupt,
+                       const std::function<void(const std::string&)>& progress,
+                       Communicator& comm) {
   MissingForce mf;
   fs::create_directories(dir);
   // The nominal model at its fit, as a scenario of its own: the field is fitted
@@ -209,6 +207,20 @@ MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
   } catch (const Error& err) {
     mf.error = err.what();
   }
+  return mf;
+}
+
+}  // namespace
+
+MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
+                               const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
+                               const MissingForceNoise& noise, const MissingForceSettings& settings,
+                               const std::string& dir, const std::atomic<bool>* interrupt,
+                               const std::function<void(const std::string&)>& progress,
+                               Communicator& comm) {
+  const auto t0 = std::chrono::steady_clock::now();
+  MissingForce mf =
+      fit_field(problem, nominal, p_nominal, axis, noise, settings, dir, interrupt, progress, comm);
   mf.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return mf;
 }

@@ -50,8 +50,9 @@ struct MissingForceNoise {
 
 /// Fits the field to `nominal` (the training scenario) at its fitted parameters
 /// p_nominal of `problem` and judges it; writes the scenarios it fits and the
-/// field's files (body-force.csv, body-force.pvd) into `dir`. The field's fit runs on
-/// `comm` (its one experiment on rank 0).
+/// field's files (body-force.csv, body-force.pvd) into `dir`. `problem` only lends its
+/// map and model (it is not evaluated); the field's fit runs on `comm` (its one
+/// experiment on rank 0).
 MissingForce fit_missing_force(FitProblem& problem, const Scenario& nominal,
                                const Eigen::VectorXd& p_nominal, const BodyAxis& axis,
                                const MissingForceNoise& noise, const MissingForceSettings& settings,

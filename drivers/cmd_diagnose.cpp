@@ -76,6 +76,9 @@ int run(const DiagnoseArgs& args) {
   } catch (const Error& e) {
     print_error(e.what());
     return kExitInputError;
+  } catch (const std::exception& e) {  // a file that could not be written, say
+    print_error(e.what());
+    return kExitRunFailed;
   }
   std::string report;
   failed.clear();
