@@ -135,8 +135,7 @@ void share_rows(FitProblem& problem, std::vector<ExperimentRows>& blocks) {
       Eigen::MatrixXd rows(b.rows.size(), b.rows.empty() ? 0 : b.rows[0].size());
       for (size_t i = 0; i < b.rows.size(); ++i) rows.row(static_cast<long>(i)) = b.rows[i];
       out.put(rows);
-      out.put(static_cast<long>(b.samples.size()));
-      for (const ResidualSample& sample : b.samples) out.put(sample);
+      each_of(out, b.samples, [](ByteWriter& bytes, const ResidualSample& x) { bytes(x); });
       put(out, problem.plan(e));
     }
   const std::vector<std::string> shares = comm.all_gather(out.bytes());
@@ -154,10 +153,7 @@ void share_rows(FitProblem& problem, std::vector<ExperimentRows>& blocks) {
       in.get(rows);
       b.rows.resize(rows.rows());
       for (long i = 0; i < rows.rows(); ++i) b.rows[i] = rows.row(i);
-      long n = 0;
-      in.get(n);
-      b.samples.resize(n);
-      for (ResidualSample& sample : b.samples) in.get(sample);
+      each_of(in, b.samples, [](ByteReader& bytes, ResidualSample& x) { bytes(x); });
       get(in, problem.plan(e));
     }
     if (!in.done()) throw Error("internal: a rank's Gauss–Newton rows were not read to their end");
