@@ -43,17 +43,24 @@ int main(int argc, char** argv) {
     const Diagnosis d = run_diagnosis((fs::path(dir) / "train.yaml").string(), out, o);
     int refit_evaluations = 0;
     for (const auto& r : d.refits) refit_evaluations += r.evaluations;
-    fmt::print("\n{}: verdict {}{}\n", fs::path(dir).filename().string(), d.effect,
-               d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")");
+    const bool second = d.second_refit.candidate >= 0;
+    if (second) refit_evaluations += d.second_refit.evaluations;
+    fmt::print("\n{}: verdict {}{}{}\n", fs::path(dir).filename().string(), d.effect,
+               d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")",
+               d.second_effect.empty() ? "" : ", second effect " + d.second_effect);
     fmt::print("| stage | wall (s) | evaluations |\n|---|---:|---:|\n");
     fmt::print("| nominal fit | {:.1f} | {} |\n", d.seconds.nominal_fit, d.nominal_evaluations);
     fmt::print("| screening ({} candidates) | {:.1f} | 1 sensitivity solve |\n",
                d.candidates.size(), d.seconds.screening);
-    fmt::print("| refits ({}) incl. held-out | {:.1f} | {} |\n", d.refits.size(), d.seconds.refits,
-               refit_evaluations);
+    fmt::print("| refits ({}) incl. held-out | {:.1f} | {} |\n", d.refits.size() + second,
+               d.seconds.refits, refit_evaluations);
     fmt::print("| held-out checks | {:.1f} | |\n", d.seconds.heldout);
-    fmt::print("| total | {:.1f} | |\n",
-               d.seconds.nominal_fit + d.seconds.screening + d.seconds.refits);
+    fmt::print("| missing force | {:.1f} | |\n", d.seconds.missing_force);
+    fmt::print("| second screening | {:.1f} | |\n", d.seconds.second_screening);
+    fmt::print("| total | {:.1f} | |\n", d.seconds.nominal_fit + d.seconds.screening +
+                                             d.seconds.refits + d.seconds.missing_force +
+                                             d.seconds.second_screening +
+                                             d.seconds.learned_correction);
     fmt::print("screening / nominal fit: {:.2f}\n", d.seconds.screening / d.seconds.nominal_fit);
   } catch (const Error& e) {
     fmt::print(stderr, "error: {}\n", e.what());

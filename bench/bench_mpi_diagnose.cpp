@@ -53,6 +53,8 @@ std::string stage_times(const Diagnosis& d) {
 /// Every number the verdict rests on, equal to the bit.
 bool same(const Diagnosis& a, const Diagnosis& b) {
   bool equal = a.effect == b.effect && a.accepted == b.accepted &&
+               a.second_effect == b.second_effect &&
+               a.second_refit.train.sum_sq == b.second_refit.train.sum_sq &&
                a.nominal_train.sum_sq == b.nominal_train.sum_sq && a.noise.sigma == b.noise.sigma &&
                a.refits.size() == b.refits.size() &&
                a.missing_force.rms_after == b.missing_force.rms_after &&

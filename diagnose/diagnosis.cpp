@@ -847,7 +847,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // saved state skips it; one that has none yet starts like a new one (V07 resumed
   // after its nominal fit started its anisotropy refit at the unchecked step: 9.13 mm
   // against the nominal's 1.37).
-  const auto linearised_start = [&](Model& model, const Eigen::VectorXd& p0,
+  const auto linearised_start = [&](Model& model, const Eigen::VectorXd& p0, double reference,
                                     const Eigen::VectorXd& nominal_p, const std::string& name,
                                     const ProgressLine& say) {
     if ((o.resume && fs::exists(state / (name + ".csv"))) || (p0 - nominal_p).norm() == 0)
@@ -855,7 +855,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     Eigen::VectorXd p = p0;
     for (int halving = 0; halving <= 3 && !stopped_here(); ++halving) {
       const MisfitFigures at = misfit(*model.problem, p, o.interrupt);
-      if (at.ok && at.sum_sq < d.nominal_train.sum_sq) {
+      if (at.ok && at.sum_sq < reference) {
         if (halving > 0)
           say(
               fmt::format("  {}: the linearised start overshoots; starting at {}/{} of its step "
@@ -872,32 +872,55 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                     name));
     return nominal_p;
   };
-  // One candidate's refit with the nominal parameters free, from `start(model,
+  // What a refit is measured against: the nominal model, or (the second stage) the
+  // model with an accepted effect at its refit. The candidate is nested in it.
+  struct RefitBase {
+    std::vector<const Candidate*> with;    // effects in the model already
+    Eigen::VectorXd p;                     // its fitted parameters, leading the map
+    const MisfitFigures* train = nullptr;  // its training misfit
+    std::vector<HeldOutFigures> heldout;   // `before`: its held-out misfits
+    int tests = 1, heldout_tests = 1;      // α is shared over these
+    std::string prefix;                    // of the refit's file names
+    int on_top_of = -1;                    // RefitResult::on_top_of
+    std::string name = "the nominal";
+  };
+  RefitBase nominal_base;
+  nominal_base.p = p_nominal;
+  nominal_base.train = &d.nominal_train;
+  nominal_base.heldout = d.nominal_heldout;
+  nominal_base.tests = m;
+  nominal_base.heldout_tests = heldout_tests;
+  // One candidate's refit with the base's parameters free, from `start(model,
   // entries)` (the candidate's entries of the model's map), and its held-out checks,
   // on this rank alone, which saves the fit's parameters as soon as it has ended (the
   // ranks' state files are theirs: --resume needs them on one file system);
   // `heldout_seconds` the time of the held-out checks.
   using Start = std::function<Eigen::VectorXd(Model&, const std::vector<int>&)>;
   const auto refit = [&](int c, const Start& start, const ProgressLine& say,
-                         double& heldout_seconds) {
+                         double& heldout_seconds, const RefitBase& base) {
     const Candidate& cand = d.candidates[c];
     RefitResult res;
     res.candidate = c;
-    const std::string name = slug(cand);
-    Model model = load_model(d.scenario, nominal, {&cand}, false,
-                             (models / (name + ".yaml")).string(), -1, serial_communicator());
+    res.on_top_of = base.on_top_of;
+    const std::string name = base.prefix + slug(cand);
+    std::vector<const Candidate*> with = base.with;
+    with.push_back(&cand);
+    Model model = load_model(d.scenario, nominal, with, false, (models / (name + ".yaml")).string(),
+                             -1, serial_communicator());
     const ParameterMap& map = model.problem->map();
-    const std::vector<int> entries = entries_of(model, model.extended.candidate_specs[0]);
+    const std::vector<int> entries = entries_of(model, model.extended.candidate_specs.back());
     res.dof = static_cast<int>(entries.size());
     const Eigen::VectorXd p0 = start(model, entries).cwiseMax(map.lower()).cwiseMin(map.upper());
-    // The nominal fit inside the extended model (the candidate at its nested value).
+    const int n_fixed = static_cast<int>(base.p.size());
+    // The base's fit inside the extended model (the candidate at its nested value).
     const auto nested_nominal = [&] {
       Eigen::VectorXd p = map.initial();
-      p.head(n_nominal) = p_nominal;
+      p.head(n_fixed) = base.p;
       return p;
     };
-    const double refit_ftol = precision(d.nominal_train.residual, d.noise.sigma);
-    const Eigen::VectorXd p_start = linearised_start(model, p0, nested_nominal(), name, say);
+    const double refit_ftol = precision(base.train->residual, d.noise.sigma);
+    const Eigen::VectorXd p_start =
+        linearised_start(model, p0, base.train->sum_sq, nested_nominal(), name, say);
     const std::string saved_at = (state / (name + ".csv")).string(),
                       saved = o.resume ? read_state(saved_at) : "";
     FitRun fit = fit_model(model, p_start, saved_at, saved, o, say, name, refit_ftol,
@@ -919,22 +942,22 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       return res;
     }
     // The refined mesh does not contain the nominal model; every other candidate does.
-    if (res.train.sum_sq > d.nominal_train.sum_sq && cand.id != "discretisation") {
+    if (res.train.sum_sq > base.train->sum_sq && cand.id != "discretisation") {
       say(
-          fmt::format("  {}: the refit ended above the nominal (train rms {:.4f} mm against "
-                      "{:.4f}); reported at the nominal point",
-                      name, res.train.rms * 1e3, d.nominal_train.rms * 1e3));
+          fmt::format("  {}: the refit ended above {} (train rms {:.4f} mm against "
+                      "{:.4f}); reported at its point",
+                      name, base.name, res.train.rms * 1e3, base.train->rms * 1e3));
       fit.p = nested_nominal();
-      res.train = d.nominal_train;
+      res.train = *base.train;
       res.at_nominal = true;
     }
     res.ok = true;
-    res.statistic = (d.nominal_train.sum_sq - res.train.sum_sq) / sigma2;
-    res.threshold = chi_square_quantile(d.settings.alpha / m, std::max(1, res.dof));
-    res.bic = res.train.sum_sq / sigma2 + (n_nominal + res.dof) * std::log(N);
+    res.statistic = (base.train->sum_sq - res.train.sum_sq) / sigma2;
+    res.threshold = chi_square_quantile(d.settings.alpha / base.tests, std::max(1, res.dof));
+    res.bic = res.train.sum_sq / sigma2 + (n_fixed + res.dof) * std::log(N);
     res.passes_training = res.statistic > res.threshold;
     res.parameters = named_values(map, fit.p, entries);
-    res.nominal_parameters = named_values(map, fit.p, range(n_nominal));
+    res.nominal_parameters = named_values(map, fit.p, range(n_fixed));
     res.p = fit.p;
     for (int j = 0; j < map.size(); ++j) res.labels.push_back(map.label(j));
     if (cand.id == "marker_offset" || cand.id == "sync_lag" || cand.id == "registration" ||
@@ -950,10 +973,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     const auto th = Clock::now();
     double spread = 0;
     for (std::size_t k = 0; k < d.settings.validate.size() && !stopped_here(); ++k) {
-      Model h = load_model(d.settings.validate[k], nominal, {&cand}, false,
+      Model h = load_model(d.settings.validate[k], nominal, with, false,
                            (models / fmt::format("heldout{}-{}.yaml", k, name)).string(), -1,
                            serial_communicator());
-      HeldOutFigures f = d.nominal_heldout[k];
+      HeldOutFigures f = base.heldout[k];
       if (h.problem->map().size() != map.size()) {
         f.after.error = "its parameters do not match the training scenario's";
       } else if (res.at_nominal) {
@@ -968,16 +991,29 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       res.heldout.push_back(f);
     }
     heldout_seconds = since(th);
-    res.heldout_threshold =
-        2 * normal_quantile(d.settings.alpha / heldout_tests) * d.noise.sigma * std::sqrt(spread);
+    res.heldout_threshold = 2 * normal_quantile(d.settings.alpha / base.heldout_tests) *
+                            d.noise.sigma * std::sqrt(spread);
     res.passes_heldout = !res.heldout.empty() && res.heldout_drop > res.heldout_threshold;
+    // Standard errors where the parameters mean something: a refit that explains more
+    // than noise (one sensitivity solve at its point).
+    if (res.passes_training && !res.at_nominal && !stopped_here()) {
+      const ParameterUncertainty u = gauss_newton_uncertainty(*model.problem, fit.p, o.interrupt);
+      if (u.ok) {
+        res.parameters = named_values(map, fit.p, entries, &u);
+        res.nominal_parameters = named_values(map, fit.p, range(n_fixed), &u);
+        for (const NamedValue& v : res.parameters)
+          say(fmt::format("  {}: {} = {:.5g} ± {:.2g}", name, v.name, v.value, v.std_error));
+      } else {
+        say(fmt::format("  {}: no standard errors: {}", name, u.error));
+      }
+    }
     double after = 0, before = 0;
     for (const auto& f : res.heldout) {
       before += f.before.sum_sq;
       after += f.after.ok ? f.after.sum_sq : f.before.sum_sq;
     }
     say(fmt::format("  {}: train rms {:.4f} → {:.4f} mm (LR {:.1f}, threshold {:.1f}){}", name,
-                    d.nominal_train.rms * 1e3, res.train.rms * 1e3, res.statistic, res.threshold,
+                    base.train->rms * 1e3, res.train.rms * 1e3, res.statistic, res.threshold,
                     res.heldout.empty()
                         ? std::string()
                         : fmt::format("; held-out ‖r‖² {:.4g} → {:.4g} mm² (needs a drop > "
@@ -1005,11 +1041,12 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     return f;
   };
   // A refit as a task of spread_tasks: packed, timed; not run ("") after an interrupt.
-  const auto refit_task = [&](int c, const Start& start, const ProgressLine& say) {
+  const auto refit_task = [&](int c, const Start& start, const ProgressLine& say,
+                              const RefitBase& base) {
     if (stopped_here()) return std::string();
     const auto tr = Clock::now();
     double heldout_seconds = 0;
-    RefitResult res = refit(c, start, say, heldout_seconds);
+    RefitResult res = refit(c, start, say, heldout_seconds, base);
     res.seconds = since(tr);
     ByteWriter bytes;
     put(bytes, res);
@@ -1017,19 +1054,22 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     return bytes.bytes();
   };
   // A gathered refit, on every rank: rank 0 writes its refitted scenario; its time
-  // counts to `stage`.
-  const auto take_refit = [&](const std::string& bytes, double& stage) {
-    if (bytes.empty()) return;
+  // counts to `stage`. Returns it (empty when it did not run).
+  const auto gathered_refit = [&](const std::string& bytes, double& stage, const RefitBase& base) {
+    std::optional<RefitResult> gathered;
+    if (bytes.empty()) return gathered;
     RefitResult res;
     double heldout_seconds = 0;
     ByteReader in(bytes);
     get(in, res);
     in.get(heldout_seconds);
     const Candidate& cand = d.candidates[res.candidate];
-    const std::string name = slug(cand);
+    const std::string name = base.prefix + slug(cand);
+    std::vector<const Candidate*> with = base.with;
+    with.push_back(&cand);
     res.fitted_yaml = on_root([&] {
       if (!res.ok) return std::string();
-      Model model = load_model(d.scenario, nominal, {&cand}, false,
+      Model model = load_model(d.scenario, nominal, with, false,
                                (models / (name + ".yaml")).string(), -1, serial_communicator());
       FemModel& fem = model.problem->experiment(0).model();
       model.problem->map().apply(res.p, fem);
@@ -1038,7 +1078,11 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     });
     stage += res.seconds;
     d.seconds.heldout += heldout_seconds;
-    d.refits.push_back(std::move(res));
+    gathered = std::move(res);
+    return gathered;
+  };
+  const auto take_refit = [&](const std::string& bytes, double& stage) {
+    if (auto res = gathered_refit(bytes, stage, nominal_base)) d.refits.push_back(std::move(*res));
   };
   // The start of a top candidate's refit: from its probe, or its screening step.
   const auto screening_start = [&](int c) {
@@ -1072,7 +1116,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       [&](int k, const ProgressLine& line) {
         if (k >= with_force) {
           const int c = order[k - with_force];
-          return refit_task(c, screening_start(c), line);
+          return refit_task(c, screening_start(c), line, nominal_base);
         }
         line(fmt::format("  missing force: {} knots in time × {} segments × 3 axes, {} evaluations",
                          std::lround(mfs.knots_per_second * nominal.time.end), mfs.segments,
@@ -1128,7 +1172,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                  [&](Model&, const std::vector<int>&) {
                    return Eigen::VectorXd(probe_start.at(c));
                  },
-                 say);
+                 say, nominal_base);
            },
            o.progress, o.interrupt))
     take_refit(bytes, d.seconds.refits);
@@ -1171,7 +1215,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     };
     take_refit(
         spread_tasks(
-            world(), 1, [&](int, const ProgressLine& line) { return refit_task(c, start, line); },
+            world(), 1,
+            [&](int, const ProgressLine& line) { return refit_task(c, start, line, nominal_base); },
             o.progress, o.interrupt)[0],
         d.seconds.learned_correction);
     if (d.refits.empty() || d.refits.back().candidate != c) {
@@ -1224,6 +1269,7 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         };
     }
     bool beside = false;  // the field was fitted beside the second screening
+    Start second_start;   // of the second candidate's refit, when one is significant
     if (!stopped() && d.accepted != d.learned) {
       t0 = Clock::now();
       say(fmt::format("stage 4: screening again with {} in the model{}", d.effect,
@@ -1262,13 +1308,31 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
         }
         d.second_ranking = rank_candidates(g2.residual, g2.jacobian, range(n_fixed), groups2, so2,
                                            d.settings.alpha);
+        if (!d.second_ranking.order.empty() && d.second_ranking.order[0].significant) {
+          const RankedCandidate& top = d.second_ranking.order[0];
+          d.second_candidate = others[top.candidate];
+          // The screening step of the second candidate, mapped to its refit's entries
+          // (when its screened form has as many), as the first stage's refits start.
+          const std::vector<int> group = groups2[top.candidate].second;
+          second_start = [&, score = top.marginal, group, n_fixed](
+                             Model& model, const std::vector<int>& entries) {
+            Eigen::VectorXd p0 = model.problem->map().initial();
+            p0.head(n_fixed) = a.p;
+            if (score.fitted_step.size() == n_fixed) p0.head(n_fixed) += score.fitted_step;
+            if (entries.size() == group.size())
+              for (std::size_t j = 0; j < score.active.size(); ++j) {
+                const long k =
+                    std::find(group.begin(), group.end(), score.active[j]) - group.begin();
+                p0[entries[k]] += score.step[j];
+              }
+            return p0;
+          };
+        }
         for (auto& rc : d.second_ranking.order) rc.candidate = others[rc.candidate];
         for (auto& c : d.second_ranking.confounded) {
           c.a = others[c.a];
           c.b = others[c.b];
         }
-        if (!d.second_ranking.order.empty() && d.second_ranking.order[0].significant)
-          d.second_candidate = d.second_ranking.order[0].candidate;
         for (const auto& rc : d.second_ranking.order)
           say(fmt::format("  {:<22} LM {:10.1f}  (threshold {:7.1f}){}",
                           slug(d.candidates[rc.candidate]), rc.marginal.statistic, rc.threshold,
@@ -1290,6 +1354,43 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     }
     if (accepted && remaining.result.empty())  // (else its task said it)
       say("  missing force left: " + describe(d.remaining_force));
+    // A second effect is named as the first was: by its refit, with the first at its
+    // refit and every parameter free, judged against that model on the training data
+    // and the held-out motions (a score alone also flags what the first refit left of
+    // the model error: V09's added mass at LM 21.1 of 17.4).
+    if (d.second_candidate >= 0 && second_start && !stopped()) {
+      RefitBase first;
+      first.with = {&d.candidates[a.candidate]};
+      first.p = a.p;
+      first.train = &a.train;
+      for (const HeldOutFigures& h : a.heldout) {
+        HeldOutFigures f = h;
+        f.before = h.after.ok ? h.after : h.before;
+        f.after = MisfitFigures();
+        first.heldout.push_back(std::move(f));
+      }
+      first.tests = static_cast<int>(d.second_ranking.order.size());
+      first.prefix = slug(d.candidates[a.candidate]) + "+";
+      first.on_top_of = a.candidate;
+      first.name = slug(d.candidates[a.candidate]) + "'s refit";
+      const int c = d.second_candidate;
+      say(fmt::format("stage 4: refit of {} with {} in the model", slug(d.candidates[c]),
+                      d.effect));
+      if (auto res = gathered_refit(spread_tasks(
+                                        world(), 1,
+                                        [&](int, const ProgressLine& line) {
+                                          return refit_task(c, second_start, line, first);
+                                        },
+                                        o.progress, o.interrupt)[0],
+                                    d.seconds.refits, first))
+        d.second_refit = std::move(*res);
+      if (d.second_refit.candidate == c && passes(d.second_refit)) {
+        d.second_effect = d.candidates[c].id;
+        d.fitted_yaml = d.second_refit.fitted_yaml;
+        if (!d.second_refit.where.empty()) d.verdict_where.push_back(d.second_refit.where);
+        say(fmt::format("  second effect: {}", slug(d.candidates[c])));
+      }
+    }
   } else {
     // The nominal model is the answer: its fitted scenario is the one to run.
     d.fitted_yaml = on_root([&] {

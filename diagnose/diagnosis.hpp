@@ -53,6 +53,9 @@ struct HeldOutFigures {
 
 struct RefitResult {
   int candidate = -1;  // index into Diagnosis::candidates
+  /// The accepted effect (index into Diagnosis::candidates) the candidate was added
+  /// to, at its refit, and judged against; -1: added to the nominal model.
+  int on_top_of = -1;
   bool ok = false;
   std::string error;
   int evaluations = 0;
@@ -123,9 +126,13 @@ struct Diagnosis {
   int learned = -1;
   CorrectionSignature signature;
   /// Screening again with the accepted effect in the model (at its refit): the
-  /// first significant candidate there is a second effect.
+  /// first significant candidate there is refitted as a second effect.
   Ranking second_ranking;
   int second_candidate = -1;
+  /// The refit of second_candidate with the accepted effect in the model (candidate
+  /// -1 when not run), and its id when it passes as the first did ("" otherwise).
+  RefitResult second_refit;
+  std::string second_effect;
   /// The missing force of the accepted model at its refit: what the effect leaves
   /// unexplained (ok false when not run).
   MissingForce remaining_force;

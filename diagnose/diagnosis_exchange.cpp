@@ -33,6 +33,7 @@ void misfit(IO& io, auto& f) {
 template <class IO>
 void refit_fields(IO& io, auto& r) {
   io(r.candidate);
+  io(r.on_top_of);
   io(r.ok);
   io(r.error);
   io(r.evaluations);

@@ -114,15 +114,40 @@ std::string heldout_prediction(const Diagnosis& d, int c) {
   return fmt::format("{:.4g}", d.predicted_heldout_drop[c] * 1e6);
 }
 
+/// One refit as a JSON object; its "before" is the model it was added to.
+std::string refit_json(const Diagnosis& d, const RefitResult& r) {
+  const double before =
+      r.on_top_of >= 0 && d.accepted >= 0 ? d.refits[d.accepted].train.rms : d.nominal_train.rms;
+  return fmt::format(
+      "{{\"candidate\": {}, \"added_to\": {}, \"ok\": {}, \"error\": {}, \"evaluations\": {}, "
+      "\"train_rms_before\": {}, \"train_rms_after\": {}, \"statistic\": {}, "
+      "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
+      "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
+      "\"passes_training\": {}, \"passes_heldout\": {}, \"at_nominal\": {}, \"where\": {}, "
+      "\"parameters\": {}, \"nominal_parameters\": {}, \"fitted\": {}}}",
+      json_string(candidate_name(d, r.candidate)),
+      r.on_top_of >= 0 ? json_string(candidate_name(d, r.on_top_of)) : "\"nominal\"",
+      r.ok ? "true" : "false", json_string(r.error), r.evaluations, json_number(before),
+      json_number(r.train.rms), json_number(r.statistic), json_number(r.threshold), r.dof,
+      json_number(r.bic), json_number(heldout_rms(r.heldout, false)),
+      json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
+      json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
+      r.passes_heldout ? "true" : "false", r.at_nominal ? "true" : "false", json_string(r.where),
+      json_values(r.parameters), json_values(r.nominal_parameters), json_string(r.fitted_yaml));
+}
+
 std::string diagnosis_json(const Diagnosis& d) {
   std::string j = "{\n";
   auto out = std::back_inserter(j);
   fmt::format_to(out, "  \"scenario\": {},\n  \"interrupted\": {},\n", json_string(d.scenario),
                  d.interrupted ? "true" : "false");
   fmt::format_to(
-      out, "  \"verdict\": {{\"effect\": {}, \"where\": {}, \"second\": {}}},\n",
+      out,
+      "  \"verdict\": {{\"effect\": {}, \"where\": {}, \"second\": {}, \"second_effect\": "
+      "{}}},\n",
       json_string(d.effect), json_strings(d.verdict_where),
-      d.second_candidate >= 0 ? json_string(candidate_name(d, d.second_candidate)) : "null");
+      d.second_candidate >= 0 ? json_string(candidate_name(d, d.second_candidate)) : "null",
+      d.second_effect.empty() ? "null" : json_string(d.second_effect));
   fmt::format_to(out, "  \"noise\": {{\"sigma\": {}, \"third_differences\": {}, \"rms\": {}}},\n",
                  json_number(d.noise.sigma), d.noise.differences, json_number(d.noise.naive));
   fmt::format_to(
@@ -212,26 +237,11 @@ std::string diagnosis_json(const Diagnosis& d) {
                    r.significant ? "true" : "false");
   }
   j += "],\n  \"refits\": [";
-  for (std::size_t k = 0; k < d.refits.size(); ++k) {
-    const RefitResult& r = d.refits[k];
-    fmt::format_to(
-        out,
-        "{}\n    {{\"candidate\": {}, \"ok\": {}, \"error\": {}, \"evaluations\": {}, "
-        "\"train_rms_before\": {}, \"train_rms_after\": {}, \"statistic\": {}, "
-        "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
-        "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
-        "\"passes_training\": {}, \"passes_heldout\": {}, \"at_nominal\": {}, \"where\": {}, "
-        "\"parameters\": {}, \"nominal_parameters\": {}, \"fitted\": {}}}",
-        k ? "," : "", json_string(candidate_name(d, r.candidate)), r.ok ? "true" : "false",
-        json_string(r.error), r.evaluations, json_number(d.nominal_train.rms),
-        json_number(r.train.rms), json_number(r.statistic), json_number(r.threshold), r.dof,
-        json_number(r.bic), json_number(heldout_rms(r.heldout, false)),
-        json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
-        json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
-        r.passes_heldout ? "true" : "false", r.at_nominal ? "true" : "false", json_string(r.where),
-        json_values(r.parameters), json_values(r.nominal_parameters), json_string(r.fitted_yaml));
-  }
-  j += "],\n  \"learned_correction\": ";
+  for (std::size_t k = 0; k < d.refits.size(); ++k)
+    j += (k ? ",\n    " : "\n    ") + refit_json(d, d.refits[k]);
+  j += "],\n  \"second_refit\": ";
+  j += d.second_refit.candidate >= 0 ? refit_json(d, d.second_refit) : "null";
+  j += ",\n  \"learned_correction\": ";
   if (d.learned < 0) {
     j += "null";
   } else {
@@ -428,8 +438,10 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
     r += "**Verdict: no significant effect.** No candidate's refit lowered the misfit by more "
          "than the estimated noise can explain";
   else
-    fmt::format_to(out, "**Verdict: {}** ({}).", d.effect,
-                   d.verdict_where.empty() ? "the whole body" : d.verdict_where[0]);
+    fmt::format_to(
+        out, "**Verdict: {}** ({}){}.", d.effect,
+        d.verdict_where.empty() ? "the whole body" : d.verdict_where[0],
+        d.second_effect.empty() ? "" : ", and a second effect: **" + d.second_effect + "**");
   if (d.effect == "none")
     r += d.settings.validate.empty() ? ".\n\n" : " on the training and the held-out motions.\n\n";
   else
@@ -443,14 +455,32 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
                      heldout_rms(a.heldout, false) * 1e3, heldout_rms(a.heldout, true) * 1e3);
     fmt::format_to(out, "; the noise level is {:.4f} mm. Fitted model: `{}`.\n\n",
                    d.noise.sigma * 1e3, a.fitted_yaml);
-    if (d.second_candidate >= 0)
+    if (d.second_candidate >= 0) {
       fmt::format_to(out,
                      "Screened again with it in the model, {} is significant too (LM {:.1f} "
-                     "against {:.1f}; not refitted).\n\n",
+                     "against {:.1f})",
                      candidate_name(d, d.second_candidate),
                      d.second_ranking.order[0].marginal.statistic,
                      d.second_ranking.order[0].threshold);
-    else if (!d.second_ranking.order.empty())
+      const RefitResult& s = d.second_refit;
+      if (s.candidate < 0)
+        r += "; it was not refitted.\n\n";
+      else if (!s.ok)
+        fmt::format_to(out, "; its refit failed: {}.\n\n", s.error);
+      else
+        fmt::format_to(
+            out,
+            ". Refitted with both, the training RMS goes from {:.4f} to {:.4f} mm (likelihood "
+            "ratio {:.1f} against {:.1f}){}: **{}**.\n\n",
+            a.train.rms * 1e3, s.train.rms * 1e3, s.statistic, s.threshold,
+            s.heldout.empty()
+                ? std::string()
+                : fmt::format(" and the held-out ‖r‖² drops by {:.4g} mm² (needs {:.3g})",
+                              s.heldout_drop * 1e6, s.heldout_threshold * 1e6),
+            d.second_effect.empty() ? "not a second effect: what it explains, noise or the "
+                                      "held-out motion does not confirm"
+                                    : "a second effect, in `" + s.fitted_yaml + "`");
+    } else if (!d.second_ranking.order.empty())
       r += "Screened again with it in the model, no further candidate is significant.\n\n";
     if (const MissingForce& f = d.remaining_force; f.ok)
       fmt::format_to(
@@ -565,19 +595,26 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
   r += "\n## How far: refits\n\n"
        "| candidate | train rms (mm) | LR statistic | threshold | held-out rms (mm) | held-out "
        "drop / threshold | where | parameters |\n|---|---:|---:|---:|---:|---:|---|---|\n";
-  for (const auto& x : d.refits) {
+  // A refit's row; a second effect's is measured from the first's refit (its held-out
+  // `before` already is).
+  const auto refit_row = [&](const RefitResult& x) {
+    const bool second = x.on_top_of >= 0 && d.accepted >= 0;
+    const std::string name =
+        second ? candidate_name(d, x.on_top_of) + " + " + candidate_name(d, x.candidate)
+               : candidate_name(d, x.candidate);
     std::string params;
     for (const auto& v : x.parameters)
-      params += fmt::format("{}{} = {:.4g}", params.empty() ? "" : ", ", v.name, v.value);
-    if (x.at_nominal) params = "refit ended above the nominal; shown at the nominal: " + params;
+      params += fmt::format(
+          "{}{} = {:.4g}{}", params.empty() ? "" : ", ", v.name, v.value,
+          std::isfinite(v.std_error) ? fmt::format(" ± {:.2g}", v.std_error) : std::string());
+    if (x.at_nominal) params = "refit ended above its start model; shown there: " + params;
     if (!x.ok) {
-      fmt::format_to(out, "| {} | failed: {} | | | | | | |\n", candidate_name(d, x.candidate),
-                     x.error);
-      continue;
+      fmt::format_to(out, "| {} | failed: {} | | | | | | |\n", name, x.error);
+      return;
     }
-    fmt::format_to(out, "| {} | {:.4f} → {:.4f} | {:.1f} | {:.1f} | {} | {} | {} | {} |\n",
-                   candidate_name(d, x.candidate), d.nominal_train.rms * 1e3, x.train.rms * 1e3,
-                   x.statistic, x.threshold,
+    fmt::format_to(out, "| {} | {:.4f} → {:.4f} | {:.1f} | {:.1f} | {} | {} | {} | {} |\n", name,
+                   (second ? d.refits[d.accepted].train.rms : d.nominal_train.rms) * 1e3,
+                   x.train.rms * 1e3, x.statistic, x.threshold,
                    x.heldout.empty()
                        ? std::string("—")
                        : fmt::format("{:.4f} → {:.4f}", heldout_rms(x.heldout, false) * 1e3,
@@ -586,7 +623,9 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
                        ? std::string("—")
                        : fmt::format("{:.2f}", x.heldout_drop / x.heldout_threshold),
                    x.where, params);
-  }
+  };
+  for (const auto& x : d.refits) refit_row(x);
+  if (d.second_refit.candidate >= 0) refit_row(d.second_refit);
   if (d.learned >= 0) {
     const RefitResult& x = d.refits[d.learned];
     r += "\n### Learned correction (unnamed)\n\nNo named candidate passed, and the nominal "

@@ -91,8 +91,9 @@ int run(const DiagnoseArgs& args) {
     print_error(why);
     return kExitRunFailed;
   }
-  fmt::print("verdict: {}{}; report: {}\n", d.effect,
-             d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")", report);
+  fmt::print("verdict: {}{}{}; report: {}\n", d.effect,
+             d.verdict_where.empty() ? "" : " (" + d.verdict_where[0] + ")",
+             d.second_effect.empty() ? "" : ", and a second effect: " + d.second_effect, report);
   if (d.interrupted) {
     if (comm.root())
       fmt::print(stderr, "interrupted; continue with: kelvin diagnose {} -o {} --resume\n",
