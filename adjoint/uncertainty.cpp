@@ -340,4 +340,15 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
   return u;
 }
 
+Eigen::VectorXd standard_errors_with_unresolved_held(const ParameterUncertainty& u,
+                                                     const ParameterMap& map,
+                                                     const Eigen::VectorXd& p) {
+  Eigen::VectorXd se = Eigen::VectorXd::Constant(map.size(), NAN);
+  if (u.root_inverse.rows() != map.size()) return se;
+  for (int j = 0; j < map.size(); ++j)
+    if (u.root_inverse.row(j).squaredNorm() > 0)
+      se[j] = map.derivative(p, j) * u.sigma * u.root_inverse.row(j).norm();
+  return se;
+}
+
 }  // namespace kelvin

@@ -91,4 +91,11 @@ std::vector<int> unresolved_entries(const ParameterMap& map, const Eigen::Vector
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);
 
+/// Model-unit standard errors of u's resolved entries with its unresolved ones held
+/// where they are (NaN for those and for entries that move no marker), from
+/// root_inverse: what is left to say when an unresolved entry made JᵀJ singular.
+Eigen::VectorXd standard_errors_with_unresolved_held(const ParameterUncertainty& u,
+                                                     const ParameterMap& map,
+                                                     const Eigen::VectorXd& p);
+
 }  // namespace kelvin

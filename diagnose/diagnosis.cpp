@@ -997,7 +997,15 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     // Standard errors where the parameters mean something: a refit that explains more
     // than noise (one sensitivity solve at its point).
     if (res.passes_training && !res.at_nominal && !stopped_here()) {
-      const ParameterUncertainty u = gauss_newton_uncertainty(*model.problem, fit.p, o.interrupt);
+      ParameterUncertainty u = gauss_newton_uncertainty(*model.problem, fit.p, o.interrupt);
+      if (!u.ok && !u.unresolved.empty() && u.root_inverse.rows() == map.size()) {
+        // A parameter the data cannot place (V07's and V09's λ, driven to 0.01 Pa)
+        // makes JᵀJ singular: the others' errors with it held, it without one.
+        u.std_error = standard_errors_with_unresolved_held(u, map, fit.p);
+        u.ok = true;
+        say(fmt::format("  {}: standard errors with {} held (the data cannot place it)", name,
+                        map.label(u.unresolved[0])));
+      }
       if (u.ok) {
         res.parameters = named_values(map, fit.p, entries, &u);
         res.nominal_parameters = named_values(map, fit.p, range(n_fixed), &u);

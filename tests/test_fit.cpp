@@ -420,6 +420,18 @@ TEST(Fit, AParameterTheDataCannotPlaceIsHeldByTheGaussNewtonScaling) {
   EXPECT_GT(u.root_inverse.row(1).norm(), 0);
   // Its standard error is still reported (the covariance is not refused).
   EXPECT_TRUE(u.ok) << u.error;
+  // Held where it is, it has none, and the others' are their errors given it:
+  // smaller (conditioning cannot widen them), the more so for μ, whose column λ's
+  // nearly repeats.
+  const Eigen::VectorXd held =
+      standard_errors_with_unresolved_held(u, f.problem->map(), f.problem->map().initial());
+  EXPECT_TRUE(std::isnan(held[0]));
+  for (int j = 1; j < 3; ++j) {
+    EXPECT_GT(held[j], 0) << j;
+    EXPECT_LE(held[j], u.std_error[j] * (1 + 1e-9)) << j;
+  }
+  EXPECT_LT(held[1], 0.05 * u.std_error[1]);         // μ: 0.5 kPa given λ, 53 kPa without
+  EXPECT_NEAR(held[2] / u.std_error[2], 1.0, 1e-3);  // ν's column is not λ's
   EXPECT_NEAR(f.q[1] / 3.0e5, 1.0, 1e-3)
       << f.outcome.stop_reason << " after " << f.outcome.evaluations;
   EXPECT_NEAR(f.q[2] / 20, 1.0, 1e-2) << f.outcome.stop_reason;
