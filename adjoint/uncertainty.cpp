@@ -267,6 +267,13 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
     u.error = sys.error;
     return u;
   }
+  return gauss_newton_uncertainty(map, p, sys);
+}
+
+ParameterUncertainty gauss_newton_uncertainty(const ParameterMap& map, const Eigen::VectorXd& p,
+                                              const GaussNewtonSystem& sys) {
+  ParameterUncertainty u;
+  const int n = static_cast<int>(sys.jacobian.cols());
   const double rtol = sys.rtol;
   const int N = static_cast<int>(sys.residual.size());
   u.observations = N;
@@ -343,9 +350,9 @@ ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::
 Eigen::VectorXd standard_errors_with_unresolved_held(const ParameterUncertainty& u,
                                                      const ParameterMap& map,
                                                      const Eigen::VectorXd& p) {
-  Eigen::VectorXd se = Eigen::VectorXd::Constant(map.size(), NAN);
-  if (u.root_inverse.rows() != map.size()) return se;
-  for (int j = 0; j < map.size(); ++j)
+  const long n = std::min<long>(u.root_inverse.rows(), map.size());
+  Eigen::VectorXd se = Eigen::VectorXd::Constant(n, NAN);
+  for (int j = 0; j < n; ++j)
     if (u.root_inverse.row(j).squaredNorm() > 0)
       se[j] = map.derivative(p, j) * u.sigma * u.root_inverse.row(j).norm();
   return se;

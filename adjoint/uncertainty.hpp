@@ -90,10 +90,15 @@ std::vector<int> unresolved_entries(const ParameterMap& map, const Eigen::Vector
 
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt = nullptr);
+/// The same from a system already solved, whose J columns are the first J.cols()
+/// entries of `map` (a larger model's system serves its leading entries).
+ParameterUncertainty gauss_newton_uncertainty(const ParameterMap& map, const Eigen::VectorXd& p,
+                                              const GaussNewtonSystem& system);
 
 /// Model-unit standard errors of u's resolved entries with its unresolved ones held
 /// where they are (NaN for those and for entries that move no marker), from
-/// root_inverse: what is left to say when an unresolved entry made JᵀJ singular.
+/// root_inverse (its entries: the first rows of `map`): what is left to say when an
+/// unresolved entry made JᵀJ singular.
 Eigen::VectorXd standard_errors_with_unresolved_held(const ParameterUncertainty& u,
                                                      const ParameterMap& map,
                                                      const Eigen::VectorXd& p);

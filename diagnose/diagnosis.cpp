@@ -195,6 +195,19 @@ std::vector<NamedValue> named_values(const ParameterMap& map, const Eigen::Vecto
   return out;
 }
 
+/// u, or when an unresolved entry made JᵀJ singular (V07's and V09's λ, driven to
+/// 0.01 Pa) the others' errors with it held, and a note of it in `error`.
+ParameterUncertainty with_held_errors(ParameterUncertainty u, const ParameterMap& map,
+                                      const Eigen::VectorXd& p) {
+  if (!u.ok && !u.unresolved.empty() && u.root_inverse.rows() > 0) {
+    u.std_error = standard_errors_with_unresolved_held(u, map, p);
+    u.ok = true;
+    u.error = fmt::format("standard errors with {} held (the data cannot place it)",
+                          map.label(u.unresolved[0]));
+  }
+  return u;
+}
+
 std::vector<int> range(int n) {
   std::vector<int> v(n);
   for (int k = 0; k < n; ++k) v[k] = k;
@@ -528,6 +541,14 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                        o.interrupt, world(), nullptr, &screening_costs);
   if (!g.ok) throw Error(fmt::format("the screening run failed: {}", g.error));
   d.noise = estimate_noise(g.residual, g.samples);
+  {
+    // The nominal parameters' standard errors from the screening's own columns.
+    GaussNewtonSystem nominal_system = g;
+    nominal_system.jacobian = g.jacobian.leftCols(n_nominal);
+    const ParameterUncertainty u =
+        with_held_errors(gauss_newton_uncertainty(smap, p_screen, nominal_system), smap, p_screen);
+    d.nominal_parameters = named_values(base_map, p_nominal, range(n_nominal), &u);
+  }
   d.nominal_train.ok = true;
   d.nominal_train.residual = g.residual;
   d.nominal_train.samples = static_cast<int>(g.residual.size());
@@ -997,15 +1018,9 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     // Standard errors where the parameters mean something: a refit that explains more
     // than noise (one sensitivity solve at its point).
     if (res.passes_training && !res.at_nominal && !stopped_here()) {
-      ParameterUncertainty u = gauss_newton_uncertainty(*model.problem, fit.p, o.interrupt);
-      if (!u.ok && !u.unresolved.empty() && u.root_inverse.rows() == map.size()) {
-        // A parameter the data cannot place (V07's and V09's λ, driven to 0.01 Pa)
-        // makes JᵀJ singular: the others' errors with it held, it without one.
-        u.std_error = standard_errors_with_unresolved_held(u, map, fit.p);
-        u.ok = true;
-        say(fmt::format("  {}: standard errors with {} held (the data cannot place it)", name,
-                        map.label(u.unresolved[0])));
-      }
+      const ParameterUncertainty u = with_held_errors(
+          gauss_newton_uncertainty(*model.problem, fit.p, o.interrupt), map, fit.p);
+      if (u.ok && !u.error.empty()) say(fmt::format("  {}: {}", name, u.error));
       if (u.ok) {
         res.parameters = named_values(map, fit.p, entries, &u);
         res.nominal_parameters = named_values(map, fit.p, range(n_fixed), &u);

@@ -497,11 +497,15 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
   fmt::format_to(out,
                  "## Nominal fit\n\n{} evaluations; training RMS {:.4f} mm per coordinate "
                  "(noise {:.4f} mm from {} third differences of the residual; the plain residual "
-                 "RMS would say {:.4f} mm).\n\n| parameter | value |\n|---|---:|\n",
+                 "RMS would say {:.4f} mm).\n\n| parameter | value | standard error |\n"
+                 "|---|---:|---:|\n",
                  d.nominal_evaluations, d.nominal_train.rms * 1e3, d.noise.sigma * 1e3,
                  d.noise.differences, d.noise.naive * 1e3);
   for (const auto& v : d.nominal_parameters)
-    fmt::format_to(out, "| {} | {:.6g} |\n", v.name, v.value);
+    fmt::format_to(out, "| {} | {:.6g} | {} |\n", v.name, v.value,
+                   std::isfinite(v.std_error) ? fmt::format("{:.2g}", v.std_error) : "—");
+  r += "\nStandard errors: Gauss–Newton, σ̂² (JᵀJ)⁻¹ with σ̂² = ‖r‖²/(N − n), which an effect "
+       "the model lacks inflates.\n";
   if (!d.stiffness_scan.empty()) {
     fmt::format_to(out,
                    "\nThe fit started at ×{:.3g} of the scenario's moduli, the best of a scan of "

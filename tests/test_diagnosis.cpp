@@ -333,6 +333,13 @@ TEST(Diagnosis, NamesTheEffectInTheDataAndHowFarItShrinksTheGap) {
   EXPECT_GT(a.heldout[0].before.rms, 2 * a.heldout[0].after.rms);
   ASSERT_EQ(a.parameters.size(), 1u);
   EXPECT_NEAR(a.parameters[0].value, 40, 4);
+  // Standard errors: the drag's from its refit, the nominal ones from the screening's
+  // columns, which the drag the nominal model lacks widens far beyond the refit's.
+  EXPECT_LT(std::abs(a.parameters[0].value - 40), 5 * a.parameters[0].std_error);
+  ASSERT_EQ(d.nominal_parameters.size(), 2u);
+  ASSERT_EQ(a.nominal_parameters.size(), 2u);
+  for (int j = 0; j < 2; ++j)
+    EXPECT_GT(d.nominal_parameters[j].std_error, 5 * a.nominal_parameters[j].std_error) << j;
   // The missing force explains the gap and sits where the drag −cρv is largest,
   // at the free end, which moves most.
   const MissingForce& f = d.missing_force;
