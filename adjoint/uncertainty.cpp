@@ -244,22 +244,30 @@ std::vector<int> unresolved_entries(const ParameterMap& map, const Eigen::Vector
   return out;
 }
 
+namespace {
+
+/// Why the standard errors of n entries of `map` are not computed ("" when they are).
+std::string refused(const ParameterMap& map, int n) {
+  // A body force's priors shape the fit (not the Gauss–Newton covariance), and it
+  // has one sensitivity per knot and entry.
+  if (map.has_body_force())
+    return "parameter uncertainties are not computed for a fit with a body-force field";
+  if (n > kMaxParameters)
+    return fmt::format(
+        "parameter uncertainties are not computed for {} parameters (limit {}): they need one "
+        "sensitivity solve per parameter; fit fewer parameters (global or per region) to get them",
+        n, kMaxParameters);
+  return "";
+}
+
+}  // namespace
+
 ParameterUncertainty gauss_newton_uncertainty(FitProblem& problem, const Eigen::VectorXd& p,
                                               const std::atomic<bool>* interrupt) {
   ParameterUncertainty u;
   const ParameterMap& map = problem.map();
-  const int n = map.size();
-  if (map.has_body_force()) {
-    // Its priors shape the fit (not the Gauss–Newton covariance), and it has one
-    // sensitivity per knot and entry.
-    u.error = "parameter uncertainties are not computed for a fit with a body-force field";
-    return u;
-  }
-  if (n > kMaxParameters) {
-    u.error = fmt::format(
-        "parameter uncertainties are not computed for {} parameters (limit {}): they need one "
-        "sensitivity solve per parameter; fit fewer parameters (global or per region) to get them",
-        n, kMaxParameters);
+  if (std::string why = refused(map, map.size()); !why.empty()) {
+    u.error = why;
     return u;
   }
   const GaussNewtonSystem sys = gauss_newton_system(problem, p, interrupt);
@@ -274,6 +282,10 @@ ParameterUncertainty gauss_newton_uncertainty(const ParameterMap& map, const Eig
                                               const GaussNewtonSystem& sys) {
   ParameterUncertainty u;
   const int n = static_cast<int>(sys.jacobian.cols());
+  if (std::string why = refused(map, n); !why.empty()) {
+    u.error = why;
+    return u;
+  }
   const double rtol = sys.rtol;
   const int N = static_cast<int>(sys.residual.size());
   u.observations = N;
@@ -316,6 +328,7 @@ ParameterUncertainty gauss_newton_uncertainty(const ParameterMap& map, const Eig
   // what a Gauss–Newton scaling of the fit needs even where the covariance is refused.
   const Eigen::MatrixXd root = scaling.norms.cwiseInverse().asDiagonal() * scaling.V *
                                scaling.sv.cwiseMax(scaling.threshold).cwiseInverse().asDiagonal();
+  u.resolved_regular = scaling.sv.size() > 0 && scaling.sv.minCoeff() > scaling.threshold;
   u.root_inverse = Eigen::MatrixXd::Zero(n, n);
   for (std::size_t k = 0; k < resolved.size(); ++k)
     u.root_inverse.row(resolved[k]).head(root.cols()) = root.row(static_cast<long>(k));

@@ -28,6 +28,9 @@ struct ParameterUncertainty {
   /// Parameters that move markers, but too little for the data to place them (see
   /// unresolved_entries, at σ̂).
   std::vector<int> unresolved;
+  /// JᵀJ of the entries that move markers and are resolved is regular on its own:
+  /// root_inverse then gives their errors with the others held.
+  bool resolved_regular = false;
 };
 
 /// Standard errors computed once at a point and reused there: the fit's Gauss–Newton

@@ -195,17 +195,61 @@ std::vector<NamedValue> named_values(const ParameterMap& map, const Eigen::Vecto
   return out;
 }
 
-/// u, or when an unresolved entry made JᵀJ singular (V07's and V09's λ, driven to
-/// 0.01 Pa) the others' errors with it held, and a note of it in `error`.
+/// u, or when an entry the data cannot place (V07's and V09's λ, driven to 0.01 Pa)
+/// or one that moves no marker made JᵀJ singular while the others' is regular, the
+/// others' errors with those held, `error` naming them.
 ParameterUncertainty with_held_errors(ParameterUncertainty u, const ParameterMap& map,
                                       const Eigen::VectorXd& p) {
-  if (!u.ok && !u.unresolved.empty() && u.root_inverse.rows() > 0) {
-    u.std_error = standard_errors_with_unresolved_held(u, map, p);
-    u.ok = true;
-    u.error = fmt::format("standard errors with {} held (the data cannot place it)",
-                          map.label(u.unresolved[0]));
-  }
+  if (u.ok || !u.resolved_regular || u.root_inverse.rows() == 0) return u;
+  u.std_error = standard_errors_with_unresolved_held(u, map, p);
+  std::string held;
+  for (long j = 0; j < u.std_error.size(); ++j)
+    if (!std::isfinite(u.std_error[j])) held += (held.empty() ? "" : ", ") + map.label(j);
+  u.ok = true;
+  u.error = fmt::format("errors given {} held (JᵀJ is singular with it: {})", held, u.error);
   return u;
+}
+
+/// A refit's start from the screening's Gauss–Newton step: the base parameters
+/// `base_p` (leading the refit model's map) moved by the step of the fitted entries
+/// that compensated for the effect's absence (a clock lag fitted as viscosity), and
+/// the candidate's own entries `entries` by its step. `group` is its entries in the
+/// screening model; a candidate screened as alternatives (score of the chosen one)
+/// puts its step on its refit's modulus, entries[0].
+Eigen::VectorXd start_from_score(const ParameterMap& map, const Eigen::VectorXd& base_p,
+                                 const CandidateScore& score, bool alternatives,
+                                 const std::vector<int>& group, const std::vector<int>& entries) {
+  Eigen::VectorXd p0 = map.initial();
+  const long n = base_p.size();
+  p0.head(n) = base_p;
+  if (score.fitted_step.size() == n) p0.head(n) += score.fitted_step;
+  if (alternatives) {
+    if (score.step.size() == 1 && !entries.empty()) p0[entries[0]] += score.step[0];
+  } else if (entries.size() == group.size()) {
+    for (std::size_t a = 0; a < score.active.size(); ++a) {
+      const long k = std::find(group.begin(), group.end(), score.active[a]) - group.begin();
+      if (k < static_cast<long>(entries.size())) p0[entries[k]] += score.step[a];
+    }
+  }
+  return p0;
+}
+
+/// For a candidate screened as alternatives (the anisotropy's directions, the
+/// relaxation's times): the score of the one alone that explains most, its index
+/// put in `choice` (its refit's form).
+CandidateScore chosen_alternative(const GaussNewtonSystem& g, int n_fitted,
+                                  const std::vector<int>& group, const ScreeningOptions& so,
+                                  const ParameterMap& map, int& choice) {
+  std::vector<std::pair<std::string, std::vector<int>>> single;
+  for (int j : group) single.push_back({map.label(j), {j}});
+  std::vector<int> fitted(n_fitted);
+  for (int k = 0; k < n_fitted; ++k) fitted[k] = k;
+  const auto s = score_candidates(g.residual, g.jacobian, fitted, single, so);
+  int best = 0;
+  for (std::size_t k = 1; k < s.size(); ++k)
+    if (s[k].predicted_drop > s[best].predicted_drop) best = static_cast<int>(k);
+  choice = best;
+  return s[best];
 }
 
 std::vector<int> range(int n) {
@@ -543,11 +587,15 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   d.noise = estimate_noise(g.residual, g.samples);
   {
     // The nominal parameters' standard errors from the screening's own columns.
-    GaussNewtonSystem nominal_system = g;
+    GaussNewtonSystem nominal_system;
+    nominal_system.ok = true;
+    nominal_system.residual = g.residual;
     nominal_system.jacobian = g.jacobian.leftCols(n_nominal);
+    nominal_system.rtol = g.rtol;
     const ParameterUncertainty u =
         with_held_errors(gauss_newton_uncertainty(smap, p_screen, nominal_system), smap, p_screen);
     d.nominal_parameters = named_values(base_map, p_nominal, range(n_nominal), &u);
+    d.nominal_errors_note = u.ok ? u.error : "no standard errors: " + u.error;
   }
   d.nominal_train.ok = true;
   d.nominal_train.residual = g.residual;
@@ -608,17 +656,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
   // relaxation's times) is refitted from the one that explains most, from its
   // Gauss–Newton step.
   std::map<int, CandidateScore> start_scores;
-  for (std::size_t c = 0; c < all.size(); ++c) {
-    if (!d.candidates[c].alternatives) continue;
-    std::vector<std::pair<std::string, std::vector<int>>> single;
-    for (int j : groups[c].second) single.push_back({smap.label(j), {j}});
-    const auto s = score_candidates(g.residual, g.jacobian, range(n_nominal), single, so);
-    int best = 0;
-    for (std::size_t k = 1; k < s.size(); ++k)
-      if (s[k].predicted_drop > s[best].predicted_drop) best = static_cast<int>(k);
-    d.candidates[c].choice = best;
-    start_scores[static_cast<int>(c)] = s[best];
-  }
+  for (std::size_t c = 0; c < all.size(); ++c)
+    if (d.candidates[c].alternatives)
+      start_scores[static_cast<int>(c)] =
+          chosen_alternative(g, n_nominal, groups[c].second, so, smap, d.candidates[c].choice);
   d.seconds.screening += since(t0);
   for (const auto& rc : d.ranking.order)
     say(fmt::format(
@@ -888,8 +929,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     }
     if (stopped_here()) return nominal_p;
     say(
-        fmt::format("  {}: the linearised start and its halvings are worse than the nominal; "
-                    "starting at the nominal",
+        fmt::format("  {}: the linearised start and its halvings are worse than the model "
+                    "without the effect; starting at its fit",
                     name));
     return nominal_p;
   };
@@ -997,8 +1038,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       Model h = load_model(d.settings.validate[k], nominal, with, false,
                            (models / fmt::format("heldout{}-{}.yaml", k, name)).string(), -1,
                            serial_communicator());
-      HeldOutFigures f = base.heldout[k];
-      if (h.problem->map().size() != map.size()) {
+      HeldOutFigures f = k < base.heldout.size() ? base.heldout[k] : HeldOutFigures();
+      if (!f.before.ok) {
+        f.after.error = "the model it is added to has no misfit there to compare with";
+      } else if (h.problem->map().size() != map.size()) {
         f.after.error = "its parameters do not match the training scenario's";
       } else if (res.at_nominal) {
         f.after = f.before;
@@ -1020,14 +1063,14 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
     if (res.passes_training && !res.at_nominal && !stopped_here()) {
       const ParameterUncertainty u = with_held_errors(
           gauss_newton_uncertainty(*model.problem, fit.p, o.interrupt), map, fit.p);
-      if (u.ok && !u.error.empty()) say(fmt::format("  {}: {}", name, u.error));
+      res.errors_note = u.ok ? u.error : "no standard errors: " + u.error;
+      if (!res.errors_note.empty()) say(fmt::format("  {}: {}", name, res.errors_note));
       if (u.ok) {
         res.parameters = named_values(map, fit.p, entries, &u);
         res.nominal_parameters = named_values(map, fit.p, range(n_fixed), &u);
         for (const NamedValue& v : res.parameters)
-          say(fmt::format("  {}: {} = {:.5g} ± {:.2g}", name, v.name, v.value, v.std_error));
-      } else {
-        say(fmt::format("  {}: no standard errors: {}", name, u.error));
+          if (std::isfinite(v.std_error))
+            say(fmt::format("  {}: {} = {:.5g} ± {:.2g}", name, v.name, v.value, v.std_error));
       }
     }
     double after = 0, before = 0;
@@ -1113,22 +1156,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       const ParameterMap& map = model.problem->map();
       if (probe_start.count(c)) return Eigen::VectorXd(probe_start.at(c));
       const CandidateScore& score = start_scores.count(c) ? start_scores.at(c) : marginal.at(c);
-      // The joint Gauss–Newton step of screening: the effect and the nominal
-      // parameters that compensated for its absence (a clock lag fitted as viscosity).
-      Eigen::VectorXd p0 = map.initial();
-      p0.head(n_nominal) = p_nominal;
-      if (score.fitted_step.size() == n_nominal) p0.head(n_nominal) += score.fitted_step;
-      if (d.candidates[c].id == "anisotropy") {
-        if (score.step.size() == 1) p0[entries[0]] = score.step[0];
-      } else if (entries.size() == groups[c].second.size()) {
-        for (std::size_t a = 0; a < score.active.size(); ++a) {
-          const long k =
-              std::find(groups[c].second.begin(), groups[c].second.end(), score.active[a]) -
-              groups[c].second.begin();
-          p0[entries[k]] += score.step[a];
-        }
-      }
-      return p0;
+      return start_from_score(map, p_nominal, score, d.candidates[c].alternatives, groups[c].second,
+                              entries);
     };
   };
   // The missing force of the nominal model needs none of the screening's results
@@ -1333,22 +1362,17 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
                                            d.settings.alpha);
         if (!d.second_ranking.order.empty() && d.second_ranking.order[0].significant) {
           const RankedCandidate& top = d.second_ranking.order[0];
+          Candidate& second = d.candidates[others[top.candidate]];
           d.second_candidate = others[top.candidate];
-          // The screening step of the second candidate, mapped to its refit's entries
-          // (when its screened form has as many), as the first stage's refits start.
+          // Its refit starts from its screening step here, as the first stage's do;
+          // one screened as alternatives takes the one that explains most here.
           const std::vector<int> group = groups2[top.candidate].second;
-          second_start = [&, score = top.marginal, group, n_fixed](
+          const CandidateScore score =
+              second.alternatives ? chosen_alternative(g2, n_fixed, group, so2, amap, second.choice)
+                                  : top.marginal;
+          second_start = [&, score, group, alternatives = second.alternatives](
                              Model& model, const std::vector<int>& entries) {
-            Eigen::VectorXd p0 = model.problem->map().initial();
-            p0.head(n_fixed) = a.p;
-            if (score.fitted_step.size() == n_fixed) p0.head(n_fixed) += score.fitted_step;
-            if (entries.size() == group.size())
-              for (std::size_t j = 0; j < score.active.size(); ++j) {
-                const long k =
-                    std::find(group.begin(), group.end(), score.active[j]) - group.begin();
-                p0[entries[k]] += score.step[j];
-              }
-            return p0;
+            return start_from_score(model.problem->map(), a.p, score, alternatives, group, entries);
           };
         }
         for (auto& rc : d.second_ranking.order) rc.candidate = others[rc.candidate];
@@ -1387,8 +1411,8 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       first.p = a.p;
       first.train = &a.train;
       for (const HeldOutFigures& h : a.heldout) {
-        HeldOutFigures f = h;
-        f.before = h.after.ok ? h.after : h.before;
+        HeldOutFigures f = h;  // a motion the first refit could not run is not judged
+        f.before = h.after;
         f.after = MisfitFigures();
         first.heldout.push_back(std::move(f));
       }
@@ -1410,7 +1434,10 @@ Diagnosis run_diagnosis(const std::string& path, const std::string& outdir,
       if (d.second_refit.candidate == c && passes(d.second_refit)) {
         d.second_effect = d.candidates[c].id;
         d.fitted_yaml = d.second_refit.fitted_yaml;
-        if (!d.second_refit.where.empty()) d.verdict_where.push_back(d.second_refit.where);
+        // (after the first effect's place, which every accepted effect has: its own
+        // or the region whose markers carry most of the residual)
+        if (!d.verdict_where.empty() && !d.second_refit.where.empty())
+          d.verdict_where.push_back(d.second_refit.where);
         say(fmt::format("  second effect: {}", slug(d.candidates[c])));
       }
     }

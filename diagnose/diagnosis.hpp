@@ -75,8 +75,12 @@ struct RefitResult {
   std::string where;  // marker, or region of a field's largest change
   std::vector<NamedValue> parameters;
   /// The nominal parameters as refitted with the effect: what they had absorbed
-  /// (a clock lag fitted as viscosity; a learned correction traded against μ).
+  /// (a clock lag fitted as viscosity; a learned correction traded against μ); for a
+  /// second effect, those of the model it was added to (the first effect's too).
   std::vector<NamedValue> nominal_parameters;
+  /// What the standard errors rest on when not on the whole JᵀJ (entries held), or
+  /// why there are none; "" when they are the plain Gauss–Newton ones.
+  std::string errors_note;
   std::string fitted_yaml;          // the refitted scenario, runnable by `kelvin simulate`
   Eigen::VectorXd p;                // refitted parameters (optimiser space)
   std::vector<std::string> labels;  // of p
@@ -100,6 +104,7 @@ struct Diagnosis {
   double stiffness_scale = 1;
   int nominal_evaluations = 0;
   std::vector<NamedValue> nominal_parameters;
+  std::string nominal_errors_note;  // as RefitResult::errors_note
   MisfitFigures nominal_train;
   std::vector<ResidualSample> nominal_samples;  // of nominal_train.residual
   std::vector<std::string> marker_names;        // the training objective's markers

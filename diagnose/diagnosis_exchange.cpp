@@ -57,6 +57,7 @@ void refit_fields(IO& io, auto& r) {
   io(r.where);
   named(io, r.parameters);
   named(io, r.nominal_parameters);
+  io(r.errors_note);
   io(r.fitted_yaml);
   io(r.p);
   strings(io, r.labels);

@@ -124,7 +124,7 @@ std::string refit_json(const Diagnosis& d, const RefitResult& r) {
       "\"threshold\": {}, \"dof\": {}, \"bic\": {}, \"heldout_rms_before\": {}, "
       "\"heldout_rms_after\": {}, \"heldout_drop\": {}, \"heldout_threshold\": {}, "
       "\"passes_training\": {}, \"passes_heldout\": {}, \"at_nominal\": {}, \"where\": {}, "
-      "\"parameters\": {}, \"nominal_parameters\": {}, \"fitted\": {}}}",
+      "\"parameters\": {}, \"nominal_parameters\": {}, \"errors_note\": {}, \"fitted\": {}}}",
       json_string(candidate_name(d, r.candidate)),
       r.on_top_of >= 0 ? json_string(candidate_name(d, r.on_top_of)) : "\"nominal\"",
       r.ok ? "true" : "false", json_string(r.error), r.evaluations, json_number(before),
@@ -133,7 +133,8 @@ std::string refit_json(const Diagnosis& d, const RefitResult& r) {
       json_number(heldout_rms(r.heldout, true)), json_number(r.heldout_drop),
       json_number(r.heldout_threshold), r.passes_training ? "true" : "false",
       r.passes_heldout ? "true" : "false", r.at_nominal ? "true" : "false", json_string(r.where),
-      json_values(r.parameters), json_values(r.nominal_parameters), json_string(r.fitted_yaml));
+      json_values(r.parameters), json_values(r.nominal_parameters), json_string(r.errors_note),
+      json_string(r.fitted_yaml));
 }
 
 std::string diagnosis_json(const Diagnosis& d) {
@@ -153,9 +154,10 @@ std::string diagnosis_json(const Diagnosis& d) {
   fmt::format_to(
       out,
       "  \"nominal\": {{\"evaluations\": {}, \"parameters\": {}, \"train_rms\": {}, "
-      "\"heldout_rms\": {}, \"start_scale\": {}, \"stiffness_scan\": [",
-      d.nominal_evaluations, json_values(d.nominal_parameters), json_number(d.nominal_train.rms),
-      json_number(heldout_rms(d.nominal_heldout, false)), json_number(d.stiffness_scale));
+      "\"errors_note\": {}, \"heldout_rms\": {}, \"start_scale\": {}, \"stiffness_scan\": [",
+      d.nominal_evaluations, json_values(d.nominal_parameters), json_string(d.nominal_errors_note),
+      json_number(d.nominal_train.rms), json_number(heldout_rms(d.nominal_heldout, false)),
+      json_number(d.stiffness_scale));
   for (std::size_t k = 0; k < d.stiffness_scan.size(); ++k)
     fmt::format_to(out, "{}{{\"scale\": {}, \"rms\": {}}}", k ? ", " : "",
                    json_number(d.stiffness_scan[k].scale),
@@ -477,8 +479,7 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
                 ? std::string()
                 : fmt::format(" and the held-out ‖r‖² drops by {:.4g} mm² (needs {:.3g})",
                               s.heldout_drop * 1e6, s.heldout_threshold * 1e6),
-            d.second_effect.empty() ? "not a second effect: what it explains, noise or the "
-                                      "held-out motion does not confirm"
+            d.second_effect.empty() ? "not a second effect: the tests do not confirm it"
                                     : "a second effect, in `" + s.fitted_yaml + "`");
     } else if (!d.second_ranking.order.empty())
       r += "Screened again with it in the model, no further candidate is significant.\n\n";
@@ -505,7 +506,9 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
     fmt::format_to(out, "| {} | {:.6g} | {} |\n", v.name, v.value,
                    std::isfinite(v.std_error) ? fmt::format("{:.2g}", v.std_error) : "—");
   r += "\nStandard errors: Gauss–Newton, σ̂² (JᵀJ)⁻¹ with σ̂² = ‖r‖²/(N − n), which an effect "
-       "the model lacks inflates.\n";
+       "the model lacks inflates" +
+       (d.nominal_errors_note.empty() ? std::string(".") : "; " + d.nominal_errors_note + ".") +
+       "\n";
   if (!d.stiffness_scan.empty()) {
     fmt::format_to(out,
                    "\nThe fit started at ×{:.3g} of the scenario's moduli, the best of a scan of "
@@ -611,6 +614,7 @@ std::string report(const Diagnosis& d, bool heldout_figure) {
       params += fmt::format(
           "{}{} = {:.4g}{}", params.empty() ? "" : ", ", v.name, v.value,
           std::isfinite(v.std_error) ? fmt::format(" ± {:.2g}", v.std_error) : std::string());
+    if (!x.errors_note.empty()) params += " (" + x.errors_note + ")";
     if (x.at_nominal) params = "refit ended above its start model; shown there: " + params;
     if (!x.ok) {
       fmt::format_to(out, "| {} | failed: {} | | | | | | |\n", name, x.error);
