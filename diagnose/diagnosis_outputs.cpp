@@ -155,8 +155,8 @@ std::string diagnosis_json(const Diagnosis& d) {
       out,
       "  \"nominal\": {{\"evaluations\": {}, \"parameters\": {}, \"train_rms\": {}, "
       "\"errors_note\": {}, \"heldout_rms\": {}, \"start_scale\": {}, \"stiffness_scan\": [",
-      d.nominal_evaluations, json_values(d.nominal_parameters), json_string(d.nominal_errors_note),
-      json_number(d.nominal_train.rms), json_number(heldout_rms(d.nominal_heldout, false)),
+      d.nominal_evaluations, json_values(d.nominal_parameters), json_number(d.nominal_train.rms),
+      json_string(d.nominal_errors_note), json_number(heldout_rms(d.nominal_heldout, false)),
       json_number(d.stiffness_scale));
   for (std::size_t k = 0; k < d.stiffness_scan.size(); ++k)
     fmt::format_to(out, "{}{{\"scale\": {}, \"rms\": {}}}", k ? ", " : "",

@@ -3,6 +3,7 @@
 // with an effect put into its tracks (named, with the misfit down to the noise) and
 // without one (none).
 #include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <atomic>
@@ -425,9 +426,22 @@ TEST(Diagnosis, NamesASecondEffectWhenItsRefitPassesAsTheFirstDid) {
   const Scenario fitted = load_scenario(d.fitted_yaml);
   ASSERT_EQ(fitted.material.viscous.size(), 2u);
   EXPECT_EQ(fitted.material.viscous[1].model, "drag");
-  std::ifstream json(dir / "out" / "diagnosis.json");
-  const std::string text((std::istreambuf_iterator<char>(json)), std::istreambuf_iterator<char>());
-  EXPECT_NE(text.find("\"second_effect\": \"marker_offset\""), std::string::npos);
+  // diagnosis.json (read as YAML, of which JSON is a subset) holds the same figures,
+  // to its ten digits, under their keys.
+  const YAML::Node json = YAML::LoadFile((dir / "out" / "diagnosis.json").string());
+  EXPECT_EQ(json["verdict"]["effect"].as<std::string>(), "drag");
+  EXPECT_EQ(json["verdict"]["second_effect"].as<std::string>(), "marker_offset");
+  EXPECT_NEAR(json["nominal"]["train_rms"].as<double>(), d.nominal_train.rms,
+              1e-8 * std::abs(d.nominal_train.rms));
+  EXPECT_NEAR(json["nominal"]["parameters"][0]["std_error"].as<double>(),
+              d.nominal_parameters[0].std_error,
+              1e-8 * std::abs(d.nominal_parameters[0].std_error));
+  const YAML::Node second = json["second_refit"];
+  EXPECT_EQ(second["added_to"].as<std::string>(), "drag");
+  EXPECT_NEAR(second["train_rms_before"].as<double>(), a.train.rms, 1e-8 * std::abs(a.train.rms));
+  EXPECT_NEAR(second["train_rms_after"].as<double>(), s.train.rms, 1e-8 * std::abs(s.train.rms));
+  EXPECT_NEAR(second["parameters"][1]["std_error"].as<double>(), s.parameters[1].std_error,
+              1e-8 * std::abs(s.parameters[1].std_error));
 }
 
 // Interrupted in its first refit, a diagnosis keeps the nominal fit and nothing of
