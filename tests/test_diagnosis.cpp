@@ -444,6 +444,28 @@ TEST(Diagnosis, NamesASecondEffectWhenItsRefitPassesAsTheFirstDid) {
               1e-8 * std::abs(s.parameters[1].std_error));
 }
 
+// A marker re-glued between two captures: the tip sits 0.04 mm off in the training
+// motion only. The second screening flags its offset and the refit explains the
+// training tracks better, but the held-out motion, whose tip is where the scenario
+// puts it, gets no better: no second effect, and fitted.yaml is the drag's alone.
+TEST(Diagnosis, ASecondCandidateTheHeldOutMotionDoesNotConfirmIsNotNamed) {
+  const fs::path dir = test::scratch("diagnosis-second-rejected");
+  const fs::path scenario = diagnosis_case(dir, kWithDrag, 23, "drag, marker_offset");
+  shift_marker(dir / "train.csv", "tip", 1, 4e-5);
+  DiagnoseOptions o;
+  const Diagnosis d = run_diagnosis(scenario.string(), (dir / "out").string(), o);
+  EXPECT_EQ(d.effect, "drag");
+  ASSERT_GE(d.second_candidate, 0);
+  EXPECT_EQ(d.candidates[d.second_candidate].where, "tip");
+  const RefitResult& s = d.second_refit;
+  ASSERT_TRUE(s.ok) << s.error;
+  EXPECT_TRUE(s.passes_training);
+  EXPECT_FALSE(s.passes_heldout);
+  EXPECT_LT(s.heldout_drop, 0);  // the offset moves the held-out tip away from its track
+  EXPECT_EQ(d.second_effect, "");
+  EXPECT_EQ(d.fitted_yaml, d.refits[d.accepted].fitted_yaml);
+}
+
 // Interrupted in its first refit, a diagnosis keeps the nominal fit and nothing of
 // the refit it stopped; --resume reuses the first, redoes the second, and comes to
 // the verdict an uninterrupted run gives.
