@@ -210,6 +210,12 @@ ParameterUncertainty with_held_errors(ParameterUncertainty u, const ParameterMap
   return u;
 }
 
+std::vector<int> range(int n) {
+  std::vector<int> v(n);
+  for (int k = 0; k < n; ++k) v[k] = k;
+  return v;
+}
+
 /// A refit's start from the screening's Gauss–Newton step: the base parameters
 /// `base_p` (leading the refit model's map) moved by the step of the fitted entries
 /// that compensated for the effect's absence (a clock lag fitted as viscosity), and
@@ -242,20 +248,12 @@ CandidateScore chosen_alternative(const GaussNewtonSystem& g, int n_fitted,
                                   const ParameterMap& map, int& choice) {
   std::vector<std::pair<std::string, std::vector<int>>> single;
   for (int j : group) single.push_back({map.label(j), {j}});
-  std::vector<int> fitted(n_fitted);
-  for (int k = 0; k < n_fitted; ++k) fitted[k] = k;
-  const auto s = score_candidates(g.residual, g.jacobian, fitted, single, so);
+  const auto s = score_candidates(g.residual, g.jacobian, range(n_fitted), single, so);
   int best = 0;
   for (std::size_t k = 1; k < s.size(); ++k)
     if (s[k].predicted_drop > s[best].predicted_drop) best = static_cast<int>(k);
   choice = best;
   return s[best];
-}
-
-std::vector<int> range(int n) {
-  std::vector<int> v(n);
-  for (int k = 0; k < n; ++k) v[k] = k;
-  return v;
 }
 
 /// Standard normal upper quantile z with P(Z > z) = p, from the χ²(1) quantile.
