@@ -375,15 +375,7 @@ void shift_marker(const fs::path& file, const std::string& name, int axis, doubl
   const long row = 3 * (std::find(t.names.begin(), t.names.end(), name) - t.names.begin()) + axis;
   ASSERT_LT(row, t.xyz.rows());
   t.xyz.row(row).array() += delta;
-  std::string csv = "t";
-  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
-  csv += "\n";
-  for (long k = 0; k < t.xyz.cols(); ++k) {
-    csv += fmt::format("{:.12g}", t.times[k]);
-    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k));
-    csv += "\n";
-  }
-  test::write_text(file, csv);
+  test::write_marker_tracks(t, file);
 }
 
 // Two effects at once: the bar drags in air and its tip marker sits 0.04 mm (4σ)

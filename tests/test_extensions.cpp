@@ -195,16 +195,7 @@ TEST_P(ExtensionRecovery, TheFitFindsTheEffectFromItsNominalValue) {
     // Recorded late by τ: the capture's clock reads t + τ at model time t.
     if (c.truth_observation == "late")
       for (double& time : t.times) time += c.truth;
-    std::string csv = "t";
-    for (const auto& n : t.names) csv += "," + n + "_x," + n + "_y," + n + "_z";
-    csv += "\n";
-    for (int k = 0; k < t.xyz.cols(); ++k) {
-      csv += fmt::format("{:.12g}", t.times[k]);
-      for (int r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k));
-      csv += "\n";
-    }
-    test::write_text(dir / "shifted.csv", csv);
-    tracks = (dir / "shifted.csv").string();
+    tracks = test::write_marker_tracks(t, dir / "shifted.csv");
   }
   const Scenario s = observing(dir, "fit", c.fit_material, tracks, "", 0.15);
   FitProblem problem(s, {c.parameter});

@@ -121,22 +121,29 @@ inline std::string simulate_tracks(const fs::path& dir, const std::string& name,
   return (dir / name / "markers.csv").string();
 }
 
+/// Writes tracks in the wide layout read_marker_tracks reads; returns the path.
+inline std::string write_marker_tracks(const MarkerTracks& t, const fs::path& out) {
+  std::string csv = "t";
+  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
+  csv += "\n";
+  for (long k = 0; k < t.xyz.cols(); ++k) {
+    csv += fmt::format("{:.12g}", t.times[k]);
+    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k));
+    csv += "\n";
+  }
+  write_text(out, csv);
+  return out.string();
+}
+
 /// Adds N(0, σ²) to every coordinate of a track file.
 inline std::string noisy_tracks(const std::string& file, const fs::path& out, double sigma,
                                 unsigned seed) {
   MarkerTracks t = read_marker_tracks(file);
   std::mt19937 rng(seed);
   std::normal_distribution<double> n(0, sigma);
-  std::string csv = "t";
-  for (const auto& m : t.names) csv += "," + m + "_x," + m + "_y," + m + "_z";
-  csv += "\n";
-  for (long k = 0; k < t.xyz.cols(); ++k) {
-    csv += fmt::format("{:.12g}", t.times[k]);
-    for (long r = 0; r < t.xyz.rows(); ++r) csv += fmt::format(",{:.12g}", t.xyz(r, k) + n(rng));
-    csv += "\n";
-  }
-  test::write_text(out, csv);
-  return out.string();
+  for (long k = 0; k < t.xyz.cols(); ++k)
+    for (long r = 0; r < t.xyz.rows(); ++r) t.xyz(r, k) += n(rng);
+  return write_marker_tracks(t, out);
 }
 
 }  // namespace kelvin::test
