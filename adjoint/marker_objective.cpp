@@ -147,8 +147,9 @@ void MarkerObjective::set_observation_vector(const Eigen::VectorXd& theta) {
   set_observation(p);
 }
 
-bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate,
-                               double* presence, double* presence_rate) const {
+bool MarkerObjective::observed(int i, double t, double offset, Eigen::Vector3d& xbar,
+                               Eigen::Vector3d* rate, double* presence,
+                               double* presence_rate) const {
   if (presence) *presence = 1;
   if (presence_rate) *presence_rate = 0;
   if (t < t0_ || t > t1_ || times_.size() < 2 || t < times_.front() || t > times_.back())
@@ -157,8 +158,8 @@ bool MarkerObjective::observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Ve
   size_t k = std::lower_bound(times_.begin(), times_.end(), t) - times_.begin();
   k = k == 0 ? 0 : k - 1;
   if (!track_[i].col(k).allFinite() || !track_[i].col(k + 1).allFinite()) return false;
-  const double s = t + obs_.clock_offset;
-  if (obs_.clock_offset != 0) {
+  const double s = t + offset;
+  if (offset != 0) {
     // A shifted clock reads the run seen around t, never across a gap. Past the run's
     // ends its tangent continues and the residual's weight falls smoothly to 0 within
     // one frame interval: the end cubics of noisy tracks, extrapolated 3.6 frames for
@@ -201,18 +202,37 @@ Eigen::Vector4d MarkerObjective::weights(int i, const FemModel& model) const {
   return w;
 }
 
-bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
-                                  Eigen::Vector3d& simulated, Eigen::Vector3d& observed_position,
-                                  double* presence) const {
-  Eigen::Vector3d xbar;
-  if (!observed(i, t, xbar, nullptr, presence)) return false;
+Eigen::Vector3d MarkerObjective::simulated(int i, const FemModel& model,
+                                           const Eigen::Matrix3Xd& x) const {
   const Eigen::Vector4d w = weights(i, model);
-  simulated.setZero();
-  for (int a = 0; a < 4; ++a) simulated += w[a] * x.col(model.mesh().tets(a, embedding_[i].tet));
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  for (int a = 0; a < 4; ++a) p += w[a] * x.col(model.mesh().tets(a, embedding_[i].tet));
+  return p;
+}
+
+Eigen::Vector3d MarkerObjective::registered(const Eigen::Vector3d& xbar) const {
   // The nominal registration leaves the capture bit for bit as recorded.
-  observed_position = obs_.rotation.isZero() && obs_.translation.isZero()
-                          ? xbar
-                          : Eigen::Vector3d(R_ * (xbar - centroid_) + centroid_ + obs_.translation);
+  if (obs_.rotation.isZero() && obs_.translation.isZero()) return xbar;
+  return R_ * (xbar - centroid_) + centroid_ + obs_.translation;
+}
+
+bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                                  Eigen::Vector3d& simulated_position,
+                                  Eigen::Vector3d& observed_position, double* presence) const {
+  Eigen::Vector3d xbar;
+  if (!observed(i, t, obs_.clock_offset, xbar, nullptr, presence)) return false;
+  simulated_position = simulated(i, model, x);
+  observed_position = registered(xbar);
+  return true;
+}
+
+bool MarkerObjective::sample_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                                  Eigen::Vector3d& simulated_position,
+                                  Eigen::Vector3d& observed_position) const {
+  Eigen::Vector3d xbar;
+  if (!observed(i, t, 0, xbar)) return false;
+  simulated_position = simulated(i, model, x);
+  observed_position = registered(xbar);
   return true;
 }
 
@@ -242,30 +262,48 @@ void MarkerObjective::add_gradient(double t, const FemModel& model, const Eigen:
   }
 }
 
-Eigen::Matrix3Xd MarkerObjective::pair_jacobian(int i, double t, const FemModel& model,
-                                                const Eigen::Matrix3Xd& x) const {
+void MarkerObjective::offset_and_registration_columns(int i, const FemModel& model,
+                                                      const Eigen::Matrix3Xd& x,
+                                                      const Eigen::Vector3d& xbar,
+                                                      Eigen::Matrix3Xd& J) const {
   const int nm = num_markers();
-  Eigen::Matrix3Xd J = Eigen::Matrix3Xd::Zero(3, num_observation_parameters());
-  Eigen::Vector3d xbar, rate;
-  double c, dc;
-  if (!observed(i, t, xbar, &rate, &c, &dc)) return J;
-  Eigen::Matrix3d R, Jr;
-  rotation_and_jacobian(obs_.rotation, R, Jr);
-  J.col(0) = -R * rate;  // ∂x̄'/∂τ = R dx̄/dt
   // ∂x*/∂δ = Σₐ xₐ ∇Nₐᵀ, the element's deformation gradient.
   const auto& el = model.elements()[embedding_[i].tet];
   Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
   for (int a = 0; a < 4; ++a) F += x.col(el.nodes[a]) * el.G.col(a).transpose();
   J.middleCols<3>(1 + 3 * i) = F;
   // ∂(R v)/∂ω = −R [v]× J_r, v = x̄ − c; ∂x̄'/∂d = I.
+  Eigen::Matrix3d R, Jr;
+  rotation_and_jacobian(obs_.rotation, R, Jr);
   J.middleCols<3>(1 + 3 * nm) = R * skew(xbar - centroid_) * Jr;
   J.middleCols<3>(4 + 3 * nm) = -Eigen::Matrix3d::Identity();
+}
+
+Eigen::Matrix3Xd MarkerObjective::pair_jacobian(int i, double t, const FemModel& model,
+                                                const Eigen::Matrix3Xd& x) const {
+  Eigen::Matrix3Xd J = Eigen::Matrix3Xd::Zero(3, num_observation_parameters());
+  Eigen::Vector3d xbar, rate;
+  double c, dc;
+  if (!observed(i, t, obs_.clock_offset, xbar, &rate, &c, &dc)) return J;
+  J.col(0) = -R_ * rate;  // ∂x̄'/∂τ = R dx̄/dt
+  offset_and_registration_columns(i, model, x, xbar, J);
   if (c == 1 && dc == 0) return J;
   // The counted residual c (x* − x̄'): its weight moves with τ too.
-  Eigen::Vector3d xs, xo;
-  marker_pair(i, t, model, x, xs, xo);
   J *= c;
-  J.col(0) += dc * (xs - xo);
+  J.col(0) += dc * (simulated(i, model, x) - registered(xbar));
+  return J;
+}
+
+Eigen::Matrix3Xd MarkerObjective::sample_jacobian(int i, double t, const FemModel& model,
+                                                  const Eigen::Matrix3Xd& x,
+                                                  const Eigen::Matrix3Xd& v,
+                                                  bool clock_moves) const {
+  Eigen::Matrix3Xd J = Eigen::Matrix3Xd::Zero(3, num_observation_parameters());
+  Eigen::Vector3d xbar;
+  if (!observed(i, t, 0, xbar)) return J;
+  // x*(t − τ): ∂/∂τ = −ẋ*, the simulated marker's velocity.
+  if (clock_moves) J.col(0) = -simulated(i, model, v);
+  offset_and_registration_columns(i, model, x, xbar, J);
   return J;
 }
 

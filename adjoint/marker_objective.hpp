@@ -67,18 +67,33 @@ class MarkerObjective {
   /// residual weight's dependence on τ included.
   void observation_gradient(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                             double* out) const;
-  /// Marker i's simulated position (its offset applied), the observed one as the
-  /// model sees it at t and, on request, the weight c ∈ [0, 1] of its residual (below
-  /// 1 only where a clock offset reads past the ends of the run seen around t); false
-  /// when it does not count at t.
+  /// Φ's pairing at model time t: marker i's simulated position (its offset applied),
+  /// the observed one as the model sees it at t (the track at t + τ) and, on request,
+  /// the weight c ∈ [0, 1] of its residual (below 1 only where a clock offset reads
+  /// past the ends of the run seen around t); false when it does not count at t.
   bool marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                    Eigen::Vector3d& simulated, Eigen::Vector3d& observed,
                    double* presence = nullptr) const;
 
-  /// d(c (x*ᵢ − x̄'ᵢ))/dθ at t (3 × num_observation_parameters()), zero where marker i
-  /// does not count: what the Gauss–Newton system needs beside c d x*/dp.
-  Eigen::Matrix3Xd pair_jacobian(int i, double t, const FemModel& model,
-                                 const Eigen::Matrix3Xd& x) const;
+  /// The model time at which a sample of the capture at t is compared: t − τ. The
+  /// frame-by-frame residuals (standard errors, likelihood ratios, held-out checks)
+  /// move the model, never the capture: a track read between its frames averages
+  /// their noise (a cubic spline a third of a frame off keeps 80 % of its variance),
+  /// which would credit any clock offset with a misfit drop of a fifth of the noise.
+  double model_time(double t) const { return t - obs_.clock_offset; }
+  /// Marker i as a frame-by-frame residual compares it: the simulated position from
+  /// x, the model at model_time(t) (its offset applied), and the capture at t
+  /// itself, registered; false when the marker does not count at t (the rule of Φ's
+  /// intervals at τ = 0).
+  bool sample_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                   Eigen::Vector3d& simulated, Eigen::Vector3d& observed) const;
+  /// d(x*ᵢ − x̄'ᵢ)/dθ of sample_pair (3 × num_observation_parameters()): the clock's
+  /// column is −ẋ*ᵢ (v the model's velocities at model_time(t)), 0 where the model
+  /// time was held at an end of the run (`clock_moves` false); zero where marker i
+  /// does not count. What the Gauss–Newton system needs beside d x*/dp.
+  Eigen::Matrix3Xd sample_jacobian(int i, double t, const FemModel& model,
+                                   const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
+                                   bool clock_moves) const;
   /// Barycentric weights of marker i with its offset applied, and its tet.
   Eigen::Vector4d weights(int i, const FemModel& model) const;
   int tet(int i) const { return embedding_[i].tet; }
@@ -96,8 +111,20 @@ class MarkerObjective {
   /// Observed position of marker i at t in the capture's own frame and clock, and
   /// on request its time derivative and the residual's weight c with dc/dτ; false
   /// when unobserved there.
-  bool observed(int i, double t, Eigen::Vector3d& xbar, Eigen::Vector3d* rate = nullptr,
-                double* presence = nullptr, double* presence_rate = nullptr) const;
+  bool observed(int i, double t, double offset, Eigen::Vector3d& xbar,
+                Eigen::Vector3d* rate = nullptr, double* presence = nullptr,
+                double* presence_rate = nullptr) const;
+  /// d(c (x*ᵢ − x̄'ᵢ))/dθ of Φ's pairing at model time t, zero where marker i does
+  /// not count: Φ's gradient in θ.
+  Eigen::Matrix3Xd pair_jacobian(int i, double t, const FemModel& model,
+                                 const Eigen::Matrix3Xd& x) const;
+  /// The registered capture R(x̄ − c) + c + d.
+  Eigen::Vector3d registered(const Eigen::Vector3d& xbar) const;
+  /// Simulated position of marker i in x (its offset applied).
+  Eigen::Vector3d simulated(int i, const FemModel& model, const Eigen::Matrix3Xd& x) const;
+  /// The columns of d(x* − x̄')/dθ other than the clock's: offsets and registration.
+  void offset_and_registration_columns(int i, const FemModel& model, const Eigen::Matrix3Xd& x,
+                                       const Eigen::Vector3d& xbar, Eigen::Matrix3Xd& J) const;
   std::vector<std::string> names_;
   std::vector<MarkerEmbedding> embedding_;
   std::vector<double> weight_, weighted_time_;

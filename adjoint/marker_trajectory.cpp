@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "adjoint/experiment_run.hpp"
@@ -11,26 +12,25 @@
 namespace kelvin {
 namespace {
 
-/// dr/dp ((3·objective markers) × np) from position sensitivities over the free
-/// dofs (n × np): clamped nodes follow a prescribed motion and contribute nothing;
-/// observation entries from the objective's own derivatives.
+/// dr/dp ((3·objective markers) × np) of the samples at capture time t, from position
+/// sensitivities over the free dofs (n × np) at the model time compared with it:
+/// clamped nodes follow a prescribed motion and contribute nothing; observation
+/// entries from the objective's own derivatives.
 Eigen::MatrixXd residual_sensitivities(const FemModel& model, const MarkerObjective& objective,
-                                       const ParameterMap& map, double t, const Eigen::Matrix3Xd& x,
+                                       const ParameterMap& map, double t, bool clock_moves,
+                                       const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& v,
                                        const Eigen::MatrixXd& sx) {
   const int nm = objective.num_markers();
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(3 * nm, sx.cols());
   for (int i = 0; i < nm; ++i) {
-    Eigen::Vector3d xs, xo;
-    double presence = 1;  // stays 1 where the marker does not count
-    objective.marker_pair(i, t, model, x, xs, xo, &presence);
-    const Eigen::Vector4d w = presence * objective.weights(i, model);
+    const Eigen::Vector4d w = objective.weights(i, model);
     for (int a = 0; a < 4; ++a) {
       const int node = model.mesh().tets(a, objective.tet(i));
       for (int c = 0; c < 3; ++c)
         if (const int d = model.dof(node, c); d >= 0) out.row(3 * i + c) += w[a] * sx.row(d);
     }
     if (map.observation_blocks().empty()) continue;
-    const Eigen::Matrix3Xd J = objective.pair_jacobian(i, t, model, x);
+    const Eigen::Matrix3Xd J = objective.sample_jacobian(i, t, model, x, v, clock_moves);
     for (const auto& o : map.observation_blocks())
       out.block(3 * i, o.offset, 3, o.count) = J.middleCols(o.theta, o.count);
   }
@@ -81,27 +81,28 @@ MarkerTrajectory simulate_markers(FitProblem& problem, int index, const Eigen::V
     Eigen::Matrix3Xd x, v;
     ExperimentResult progress;
     for (double t : times) {
-      if (!run.advance(*integ, t, progress, run.t_end)) {
+      // The capture at t is compared with the model at t − τ, held at the run's ends.
+      const double tm = std::clamp(objective.model_time(t), run.t0, run.t_end);
+      if (!run.advance(*integ, tm, progress, run.t_end)) {
         out.error = progress.error;
         return out;
       }
-      model.expand(t, integ->positions().data(), integ->velocities().data(), x, v);
+      model.expand(tm, integ->positions().data(), integ->velocities().data(), x, v);
       out.times.push_back(t);
       out.positions.push_back(marker_positions(model.mesh(), markers, x));
       Eigen::Matrix3Xd r(3, objective.num_markers());
       Eigen::Vector3d xs, xo;
-      double presence;
       for (int i = 0; i < objective.num_markers(); ++i)
-        r.col(i) = objective.marker_pair(i, t, model, x, xs, xo, &presence)
-                       ? Eigen::Vector3d(presence * (xs - xo))
-                       : Eigen::Vector3d::Constant(NAN);
+        r.col(i) = objective.sample_pair(i, t, model, x, xs, xo) ? Eigen::Vector3d(xs - xo)
+                                                                 : Eigen::Vector3d::Constant(NAN);
       out.residuals.push_back(r);
       if (!with_sensitivities) continue;
       // Before the first step IDAS has no interpolant to ask.
-      const Eigen::MatrixXd s = t == run.t0 ? yS0 : integ->state_sensitivities();
+      const Eigen::MatrixXd s = tm == run.t0 ? yS0 : integ->state_sensitivities();
       for (size_t j = 0; j < entries.size(); ++j)
         sx.col(entries[j]) = s.col(static_cast<long>(j)).head(n);
-      out.residual_sensitivities.push_back(residual_sensitivities(model, objective, map, t, x, sx));
+      out.residual_sensitivities.push_back(residual_sensitivities(
+          model, objective, map, t, tm == objective.model_time(t), x, v, sx));
     }
     out.stats = integ->stats();
   } catch (const Error& e) {

@@ -16,13 +16,16 @@ namespace kelvin {
 
 struct MarkerTrajectory {
   bool ok = false;
-  std::string error;  // why the simulation failed (names the time)
-  std::vector<double> times;
-  std::vector<Eigen::Matrix3Xd> positions;  // per time: 3 × embedded markers
-  /// Per time: the residuals rᵢ = x*ᵢ − x̄'ᵢ of the objective's markers as Φ
-  /// compares them (observation parameters applied; 3 × objective markers, NaN where
-  /// marker i does not count at t) and, with sensitivities, dr/dp ((3·objective
-  /// markers) × p.size(), row 3i+c; observation entries included).
+  std::string error;          // why the simulation failed (names the time)
+  std::vector<double> times;  // in the capture's clock
+  /// Per time t: the embedded markers (3 × markers) of the model at t − τ, τ the
+  /// clock offset (held at the run's ends), where the capture's frame at t is compared.
+  std::vector<Eigen::Matrix3Xd> positions;
+  /// Per time: the residuals rᵢ = x*ᵢ(t − τ) − x̄'ᵢ(t) of the objective's markers
+  /// (observation parameters applied, the capture never read between its frames;
+  /// 3 × objective markers, NaN where marker i does not count at t) and, with
+  /// sensitivities, dr/dp ((3·objective markers) × p.size(), row 3i+c; observation
+  /// entries included).
   std::vector<Eigen::Matrix3Xd> residuals;
   std::vector<Eigen::MatrixXd> residual_sensitivities;
   IntegratorStats stats;  // of the run that made the samples
