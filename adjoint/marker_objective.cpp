@@ -170,10 +170,8 @@ bool MarkerObjective::observed(int i, double t, double offset, Eigen::Vector3d& 
       const bool after = s > finish;
       const int end = after ? last : first;
       const double h = after ? finish - times_[last - 1] : times_[first + 1] - begin;
-      // Beyond one interval the residual's weight is 0, but the sample still counts:
-      // every clock offset sees the same samples as τ = 0, so that misfits at two
-      // offsets compare sample by sample (a dropped sample would also lower ‖r‖² by
-      // its noise alone).
+      // Beyond one interval the residual's weight is 0, but the interval still
+      // counts: Φ at every clock offset integrates over the intervals of τ = 0.
       const double q = std::min((after ? s - finish : begin - s) / h, 1.0);
       if (presence) *presence = 1 - q * q * (3 - 2 * q);
       if (presence_rate) *presence_rate = 6 * q * (q - 1) / h * (after ? 1 : -1);

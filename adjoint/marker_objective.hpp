@@ -10,8 +10,10 @@
 /// A clock offset reads each run's spline at t + τ; where that falls past the run's
 /// ends, the residual counts with a weight c that falls smoothly from 1 to 0 within
 /// one frame interval (the counted residual is c (x* − x̄)), so Φ stays smooth in τ
-/// and never compares with a track extrapolated far past what was seen. The samples
-/// that count are those of τ = 0 at every τ (some with weight 0).
+/// and never compares with a track extrapolated far past what was seen. The
+/// intervals that count are those of τ = 0 at every τ (some with weight 0). Frame-by-
+/// frame residuals (sample_pair) instead compare each captured frame with the model
+/// at t − τ.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -25,7 +27,8 @@ namespace kelvin {
 
 /// How the capture relates to the model, all zero in the nominal model (each is a
 /// nested extension of the gap diagnosis): a clock offset τ (the marker clock runs
-/// ahead of the clamp's: the model at t is compared with the tracks at t + τ), an
+/// ahead of the clamp's: Φ compares the model at t with the tracks at t + τ, a frame
+/// residual the captured frame at t with the model at t − τ), an
 /// offset δᵢ of each marker's rest position (rest frame, m), and a rigid
 /// registration of the capture frame: x̄ ↦ R(ω)(x̄ − c) + c + d, R(ω) = exp([ω]×),
 /// c the mean of the captured positions.
@@ -78,8 +81,11 @@ class MarkerObjective {
   /// The model time at which a sample of the capture at t is compared: t − τ. The
   /// frame-by-frame residuals (standard errors, likelihood ratios, held-out checks)
   /// move the model, never the capture: a track read between its frames averages
-  /// their noise (a cubic spline a third of a frame off keeps 80 % of its variance),
-  /// which would credit any clock offset with a misfit drop of a fifth of the noise.
+  /// their noise (a cubic spline a third of a frame off keeps 80 % of its variance,
+  /// half a frame off 75 %), which would credit any clock offset with a misfit drop
+  /// of up to a quarter of the noise. A model time outside the run is held at its
+  /// first state (the body at rest before a static or resting start) or its last
+  /// (past the end: a stand-in that charges a negative offset its last |τ| of frames).
   double model_time(double t) const { return t - obs_.clock_offset; }
   /// Marker i as a frame-by-frame residual compares it: the simulated position from
   /// x, the model at model_time(t) (its offset applied), and the capture at t

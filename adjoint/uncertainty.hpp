@@ -51,13 +51,14 @@ struct ResidualSample {
   double sqrt_weight = 1;  // the residual entry is √wᵢ times the distance
 };
 
-/// The weighted residuals r (simulated − observed as Φ compares them, observation
-/// parameters applied, per observed coordinate of every experiment, at the capture
-/// frames in the objective's window) and their Jacobian J = dr/dp from one
-/// forward-sensitivity solve per experiment (observation entries from the
-/// objective's own derivatives); then every static measurement's coordinates,
-/// weighted as Φ weighs them against the first motion's frames, with J from the
-/// linearised equilibrium. Refused (error) for experiments with shape targets.
+/// The weighted residuals r (simulated − observed, observation parameters applied,
+/// per observed coordinate of every experiment, at the capture frames in the
+/// objective's window, each against the model at t − τ: simulate_markers) and
+/// their Jacobian J = dr/dp from one forward-sensitivity solve per experiment
+/// (observation entries from the objective's own derivatives); then every static
+/// measurement's coordinates, weighted as Φ weighs them against the first motion's
+/// frames, with J from the linearised equilibrium. Refused (error) for experiments with shape
+/// targets.
 struct GaussNewtonSystem {
   bool ok = false;
   std::string error;

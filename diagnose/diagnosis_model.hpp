@@ -41,8 +41,8 @@ std::vector<int> entries_of(const Model& m, const std::vector<int>& specs);
 /// sensitivities together: a nested candidate at its nominal value leaves the tracks
 /// where the model without it puts them, so its columns of J are those of the base
 /// model (the nominal one and with[refit_form]) extended by it alone. One run of the
-/// base model, with the candidates that only re-read the capture (marker offsets, the
-/// clock, the registration), gives r and the base's columns; each other candidate's
+/// base model, with the candidates whose columns need no sensitivities of their own
+/// (marker offsets, the clock, the registration), gives r and the base's columns; each other candidate's
 /// run integrates its own sensitivities only: in a joint run every candidate's terms
 /// would slow every step of every sensitivity. The per-candidate models are written
 /// to `dir`/`stem`-<id>.yaml. `m` must have been made from `with` and `refit_form`.
