@@ -124,8 +124,7 @@ void MarkerObjective::set_observation(const ObservationParams& params) {
   obs_ = params;
   if (obs_.marker_offsets.cols() != num_markers())
     obs_.marker_offsets = Eigen::Matrix3Xd::Zero(3, num_markers());
-  Eigen::Matrix3d Jr;
-  rotation_and_jacobian(obs_.rotation, R_, Jr);
+  rotation_and_jacobian(obs_.rotation, R_, Jr_);
 }
 
 Eigen::VectorXd MarkerObjective::observation_vector() const {
@@ -214,24 +213,26 @@ Eigen::Vector3d MarkerObjective::registered(const Eigen::Vector3d& xbar) const {
   return R_ * (xbar - centroid_) + centroid_ + obs_.translation;
 }
 
-bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
-                                  Eigen::Vector3d& simulated_position,
-                                  Eigen::Vector3d& observed_position, double* presence) const {
+bool MarkerObjective::pair(int i, double t, double offset, const FemModel& model,
+                           const Eigen::Matrix3Xd& x, Eigen::Vector3d& simulated_position,
+                           Eigen::Vector3d& observed_position, double* presence) const {
   Eigen::Vector3d xbar;
-  if (!observed(i, t, obs_.clock_offset, xbar, nullptr, presence)) return false;
+  if (!observed(i, t, offset, xbar, nullptr, presence)) return false;
   simulated_position = simulated(i, model, x);
   observed_position = registered(xbar);
   return true;
 }
 
+bool MarkerObjective::marker_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
+                                  Eigen::Vector3d& simulated_position,
+                                  Eigen::Vector3d& observed_position, double* presence) const {
+  return pair(i, t, obs_.clock_offset, model, x, simulated_position, observed_position, presence);
+}
+
 bool MarkerObjective::sample_pair(int i, double t, const FemModel& model, const Eigen::Matrix3Xd& x,
                                   Eigen::Vector3d& simulated_position,
                                   Eigen::Vector3d& observed_position) const {
-  Eigen::Vector3d xbar;
-  if (!observed(i, t, 0, xbar)) return false;
-  simulated_position = simulated(i, model, x);
-  observed_position = registered(xbar);
-  return true;
+  return pair(i, t, 0, model, x, simulated_position, observed_position);
 }
 
 void MarkerObjective::integrand(double t, const FemModel& model, const Eigen::Matrix3Xd& x,
@@ -271,9 +272,7 @@ void MarkerObjective::offset_and_registration_columns(int i, const FemModel& mod
   for (int a = 0; a < 4; ++a) F += x.col(el.nodes[a]) * el.G.col(a).transpose();
   J.middleCols<3>(1 + 3 * i) = F;
   // ∂(R v)/∂ω = −R [v]× J_r, v = x̄ − c; ∂x̄'/∂d = I.
-  Eigen::Matrix3d R, Jr;
-  rotation_and_jacobian(obs_.rotation, R, Jr);
-  J.middleCols<3>(1 + 3 * nm) = R * skew(xbar - centroid_) * Jr;
+  J.middleCols<3>(1 + 3 * nm) = R_ * skew(xbar - centroid_) * Jr_;
   J.middleCols<3>(4 + 3 * nm) = -Eigen::Matrix3d::Identity();
 }
 

@@ -124,6 +124,10 @@ class MarkerObjective {
   /// not count: Φ's gradient in θ.
   Eigen::Matrix3Xd pair_jacobian(int i, double t, const FemModel& model,
                                  const Eigen::Matrix3Xd& x) const;
+  /// marker_pair and sample_pair: the capture read at t + offset.
+  bool pair(int i, double t, double offset, const FemModel& model, const Eigen::Matrix3Xd& x,
+            Eigen::Vector3d& simulated, Eigen::Vector3d& observed,
+            double* presence = nullptr) const;
   /// The registered capture R(x̄ − c) + c + d.
   Eigen::Vector3d registered(const Eigen::Vector3d& xbar) const;
   /// Simulated position of marker i in x (its offset applied).
@@ -141,7 +145,8 @@ class MarkerObjective {
   std::vector<std::vector<int>> run_first_, run_last_;  // per marker, per frame: its seen run
   Eigen::Vector3d centroid_ = Eigen::Vector3d::Zero();  // of the captured positions
   ObservationParams obs_;
-  Eigen::Matrix3d R_ = Eigen::Matrix3d::Identity();  // R(obs_.rotation)
+  Eigen::Matrix3d R_ = Eigen::Matrix3d::Identity();   // R(obs_.rotation)
+  Eigen::Matrix3d Jr_ = Eigen::Matrix3d::Identity();  // its right Jacobian J_r
 };
 
 }  // namespace kelvin

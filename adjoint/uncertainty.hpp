@@ -57,8 +57,8 @@ struct ResidualSample {
 /// their Jacobian J = dr/dp from one forward-sensitivity solve per experiment
 /// (observation entries from the objective's own derivatives); then every static
 /// measurement's coordinates, weighted as Φ weighs them against the first motion's
-/// frames, with J from the linearised equilibrium. Refused (error) for experiments with shape
-/// targets.
+/// frames, with J from the linearised equilibrium. Refused (error) for experiments
+/// with shape targets.
 struct GaussNewtonSystem {
   bool ok = false;
   std::string error;
